@@ -1,0 +1,36 @@
+"""taskalloc: decentralised multi-agent task allocation (CBBA, CBGA, CBGABI) as a PettingZoo environment.
+
+Importing the package registers ``taskalloc/TaskAlloc-v0`` for ``pettingzoo.make("parallel", ...)`` and
+``pettingzoo.make("aec", ...)``.
+"""
+
+from __future__ import annotations
+
+import pettingzoo
+
+from taskalloc_env.allocation import Allocation
+from taskalloc_env.config import ConfigError, TaskAllocConfig, load_config, resolve_config
+from taskalloc_env.env import InvalidActionError, TaskAllocEnv
+from taskalloc_env.observation import ObservationLayout
+from taskalloc_env.scenario import Agent, Scenario, Task, generate
+
+ENV_ID = "taskalloc/TaskAlloc-v0"
+
+pettingzoo.register("parallel", ENV_ID, entry_point="taskalloc_env.taskalloc_v0:parallel_env")
+pettingzoo.register("aec", ENV_ID, entry_point="taskalloc_env.taskalloc_v0:env")
+
+__all__ = [
+    "ENV_ID",
+    "Agent",
+    "Allocation",
+    "ConfigError",
+    "InvalidActionError",
+    "ObservationLayout",
+    "Scenario",
+    "Task",
+    "TaskAllocConfig",
+    "TaskAllocEnv",
+    "generate",
+    "load_config",
+    "resolve_config",
+]

@@ -1,0 +1,80 @@
+"""The allocation type every solver returns: paths with start times, groups, validity, score and traffic.
+
+``Allocation.from_paths`` scores each agent's own path with the shared scoring code (spec cbga §1.7), so the
+environment's ``evaluate()``, the centralised greedy SGAMA and the exact optimum are compared on equal terms.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from typing import Any
+
+from taskalloc_env.scoring import Schedule, ScoringModel, team_score
+
+
+@dataclasses.dataclass(frozen=True)
+class Allocation:
+    """One assignment of agents to tasks and how it came about."""
+
+    paths: tuple[tuple[int, ...], ...]          # per agent: task ids in execution order
+    start_times: tuple[tuple[float, ...], ...]  # per agent: start time of each path task
+    members: tuple[tuple[int, ...], ...]        # per task: agents with it on their own path
+    valid_tasks: tuple[int, ...]                # tasks that pay (exactly L_j members, equipment, prerequisites)
+    conflicts: tuple[int, ...]                  # tasks with more than L_j members
+    score: float
+    agent_scores: tuple[float, ...]
+    rounds: int = 0
+    messages: int = 0
+    informative_messages: int = 0
+    data_items: int = 0
+    bids: int = 0
+    quits: int = 0
+    converged: bool = True
+    agreement: bool = True                      # every agent of a component holds the same table
+
+    @classmethod
+    def from_paths(cls, model: ScoringModel, paths: Sequence[Sequence[int]], conflict_policy: str = "first_L_paid",
+                   schedules: Sequence[Schedule] | None = None, **figures: Any) -> Allocation:
+        """Score ``paths`` (one per agent) and wrap them with the run's ``figures`` (rounds, messages, ...)."""
+        if schedules is None:
+            schedules = [model.schedule(i, p) for i, p in enumerate(paths)]
+        infeasible = [i for i, s in enumerate(schedules) if not s.feasible]
+        if infeasible:
+            raise ValueError(f"the paths of agents {infeasible} miss a time window; an allocation must be feasible")
+        ts = team_score(model, schedules, conflict_policy)
+        n_tasks = model.scenario.n_tasks
+        members = tuple(tuple(int(i) for i in ts.members[:, j].nonzero()[0]) for j in range(n_tasks))
+        return cls(
+            paths=tuple(tuple(s.path) for s in schedules),
+            start_times=tuple(tuple(float(t) for t in s.start) for s in schedules),
+            members=members,
+            valid_tasks=tuple(int(j) for j in ts.valid.nonzero()[0]),
+            conflicts=tuple(int(j) for j in ts.conflicts.nonzero()[0]),
+            score=ts.score,
+            agent_scores=tuple(float(v) for v in ts.agent_scores),
+            **figures,
+        )
+
+    @property
+    def n_valid(self) -> int:
+        return len(self.valid_tasks)
+
+    def summary(self) -> dict[str, Any]:
+        """The scalar figures (what infos and result tables carry)."""
+        return {
+            "score": self.score,
+            "valid_tasks": self.n_valid,
+            "conflicts": len(self.conflicts),
+            "rounds": self.rounds,
+            "messages": self.messages,
+            "informative_messages": self.informative_messages,
+            "data_items": self.data_items,
+            "bids": self.bids,
+            "quits": self.quits,
+            "converged": self.converged,
+            "agreement": self.agreement,
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)

@@ -1,0 +1,133 @@
+"""Which bids each agent may place, read from its own local table (spec cbga §3.3–3.5).
+
+``bid_view`` computes, for every agent i and task j at once:
+
+* the eligibility filters of §3.3: equipment (te_j = ∅ or ae_i ∩ te_j ≠ ∅), prerequisites per ``prereq_mode``
+  (§1.5), a feasible insertion (c_ij > 0), ``require_known_capacity``, ``quit_block``, j ∉ b_i, |b_i| < M_m;
+* the outbid test h_ij of §3.4: for L_j = 1, (c_ij, i) ≻ (y_j, z_j) (3.12); for L_j > 1, a free slot that i's
+  equipment fills, or (c_ij, i) ≻ the (bid, id)-lowest same-equipment member (3.13)–(3.15);
+* what the bid would do to the group: the member it would displace, that member's bid, the group total
+  Σ_k X_i[k][j] (4.2), so that the team value of (5.5) is group_total − displaced_bid + c_ij (``team_value=net``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from taskalloc_env.cbba_table import NONE, outbids
+from taskalloc_env.group_merge import Equipment
+from taskalloc_env.knowledge import NEVER, LocalKnowledge
+from taskalloc_env.scenario import Scenario
+
+
+@dataclasses.dataclass(frozen=True)
+class BidView:
+    """Per (agent, task) arrays, all (N, M)."""
+
+    gain: np.ndarray            # c_ij (3.11)
+    slot: np.ndarray            # n_ij, the best insertion slot
+    outbid: np.ndarray          # h_ij
+    eligible: np.ndarray        # all §3.3 filters except the window (which ``gain`` > 0 encodes)
+    equipment_match: np.ndarray
+    prereqs_met: np.ndarray
+    members: np.ndarray         # member count n_j in i's table
+    group_total: np.ndarray     # C_j = Σ_k X_i[k][j]
+    lowest_bid: np.ndarray      # the lowest member bid (0 if no member)
+    displaced: np.ndarray       # the member a bid would displace, or NONE
+    displaced_bid: np.ndarray   # that member's bid (0 if none)
+    in_bundle: np.ndarray
+
+    @property
+    def can_bid(self) -> np.ndarray:
+        """Valid bids: eligible, outbidding, with a positive marginal gain."""
+        return self.eligible & self.outbid & (self.gain > 0)
+
+    @property
+    def team_value(self) -> np.ndarray:
+        """Σ_k X_i[k][j] − (displaced bid) + c_ij: the group total after the bid (spec cbga §5.2, ``net``)."""
+        return self.group_total - self.displaced_bid + self.gain
+
+
+def prerequisites_met(knowledge: LocalKnowledge, scenario: Scenario, counts: np.ndarray, mode: str) -> np.ndarray:
+    """(N, M) prerequisite filter per ``prereq_mode`` (spec cbga §1.5), evaluated on each agent's own table."""
+    prereqs = scenario.task_prereqs
+    if not prereqs.any():
+        return np.ones(counts.shape, dtype=bool)
+    lacking = prereqs.astype(np.int64).T
+    if mode == "all_have_bid":
+        return (counts == 0).astype(np.int64) @ lacking == 0
+    if mode == "all_complete":
+        complete = complete_groups(knowledge, scenario, counts)
+        return (~complete).astype(np.int64) @ lacking == 0
+    has_prereqs = prereqs.any(axis=1)[None, :]
+    return ((counts > 0).astype(np.int64) @ lacking > 0) | ~has_prereqs
+
+
+def complete_groups(knowledge: LocalKnowledge, scenario: Scenario, counts: np.ndarray) -> np.ndarray:
+    """(N, M) column j of i's table has L_j members whose equipment covers te_j."""
+    full = counts == scenario.task_agents[None, :]
+    if not scenario.has_equipment:
+        return full
+    have = np.einsum("ikm,ke->ime", (knowledge.bids > 0).astype(np.int64),
+                     scenario.agent_equipment.astype(np.int64))
+    return full & np.all(have >= scenario.task_equipment[None, :, :], axis=2)
+
+
+def known_capacity(knowledge: LocalKnowledge, scenario: Scenario, equipment_match: np.ndarray) -> np.ndarray:
+    """(N, M) i knows at least L_j agents (itself included) that can jointly cover te_j (spec cbga §3.3 filter 4)."""
+    known = knowledge.known.astype(np.int64)
+    enough = known @ equipment_match.astype(np.int64) >= scenario.task_agents[None, :]
+    have = known @ scenario.agent_equipment.astype(np.int64)                       # (N, E)
+    covered = np.all(have[:, None, :] >= scenario.task_equipment[None, :, :], axis=2)
+    return (enough & covered) | ~scenario.multi_agent[None, :]
+
+
+def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment, equipment_match: np.ndarray,
+             gain: np.ndarray, slot: np.ndarray, *, prereq_mode: str, require_known_capacity: bool,
+             max_bundle: int) -> BidView:
+    """The bidding situation of every agent, computed from its local table only."""
+    n, m = gain.shape
+    agents = np.arange(n)
+    bids = knowledge.bids
+    present = bids > 0
+    counts = present.sum(axis=1)
+    group_total = bids.sum(axis=1)
+    lowest_bid = np.where(counts > 0, np.where(present, bids, np.inf).min(axis=1), 0.0)
+    in_bundle = knowledge.own_bids() > 0
+    outbid = np.zeros((n, m), dtype=bool)
+    displaced = np.full((n, m), NONE, dtype=np.int64)
+    displaced_bid = np.zeros((n, m))
+
+    single = knowledge.single
+    if single.any():
+        winner = knowledge.winner[:, single]
+        held = knowledge.winning_bid()[:, single]
+        outbid[:, single] = (winner == NONE) | outbids(gain[:, single], agents[:, None], held, winner)
+        displaced[:, single] = winner
+        displaced_bid[:, single] = held
+    multi = ~single
+    if multi.any():
+        members = present[:, :, multi]
+        newcomer = np.broadcast_to(agents[:, None], (n, int(multi.sum())))
+        eq = equipment.subset(multi)
+        room = (counts[:, multi] < scenario.task_agents[None, multi]) & eq.slot_open(members, newcomer)
+        victims = eq.replaceable(members, newcomer)
+        lowest = np.argmin(np.where(victims, bids[:, :, multi], np.inf), axis=1)
+        low_bid = np.take_along_axis(bids[:, :, multi], lowest[:, None, :], axis=1)[:, 0, :]
+        beats = victims.any(axis=1) & outbids(gain[:, multi], agents[:, None], low_bid, lowest)
+        outbid[:, multi] = room | beats
+        displaced[:, multi] = np.where(~room & beats, lowest, NONE)
+        displaced_bid[:, multi] = np.where(~room & beats, low_bid, 0.0)
+
+    prereqs_met = prerequisites_met(knowledge, scenario, counts, prereq_mode)
+    eligible = equipment_match & prereqs_met & ~in_bundle
+    if require_known_capacity:
+        eligible &= known_capacity(knowledge, scenario, equipment_match)
+    eligible &= knowledge.quit_members == NEVER
+    bundle_sizes = np.array([len(b) for b in knowledge.bundles])
+    eligible &= (bundle_sizes < max_bundle)[:, None]
+    return BidView(gain=gain, slot=slot, outbid=outbid, eligible=eligible, equipment_match=equipment_match,
+                   prereqs_met=prereqs_met, members=counts, group_total=group_total, lowest_bid=lowest_bid,
+                   displaced=displaced, displaced_bid=displaced_bid, in_bundle=in_bundle)

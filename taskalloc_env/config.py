@@ -1,0 +1,362 @@
+"""Configuration of a task-allocation problem and of the consensus protocol that solves it.
+
+One flat, frozen :class:`TaskAllocConfig` holds three groups of fields:
+
+* scenario generation (spec cbga §6.1, §6.3): counts, arena, speeds, windows, agent types, task equipment mixes,
+  prerequisite chains, communication range;
+* scoring (spec cbga §1.7, §3.1–3.2): discount rates and the named options ``distance_cost``, ``prereq_timing``,
+  ``reward_split``, ``conflict_policy``, ``marginal_gain``;
+* protocol (spec cbga §3.3–§5.3, §4.2): ``cbba_table``, ``prereq_mode``, ``release_order``, ``task_quitting``,
+  ``delta``, ``reset_on``, ``quit_block``, ``require_known_capacity``, ``consensus``, ``max_bundle``,
+  ``max_rounds``.
+
+Every option named in the spec keeps its name and defaults to the spec's choice. Configs come from YAML files in
+``configs/scenarios/`` (``load_config``) and keyword overrides (``TaskAllocConfig.replace``); unknown keys and bad
+values raise :class:`ConfigError` naming the field and the allowed values.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+SCENARIO_DIR = Path(__file__).resolve().parent.parent / "configs" / "scenarios"
+
+
+class ConfigError(ValueError):
+    """A configuration field has a bad value or an unknown name."""
+
+
+# Allowed values of every named option (spec cbga §11, plus ``marginal_gain`` and ``consensus``).
+CHOICES: dict[str, tuple[str, ...]] = {
+    "units": ("km_min", "raw"),
+    "edge_rule": ("dist", "circles_overlap"),
+    "distance_cost": ("leg", "from_start"),
+    "prereq_mode": ("all_have_bid", "all_complete", "any_has_bid"),
+    "prereq_timing": ("conservative", "earliest", "none"),
+    "conflict_policy": ("first_L_paid", "none_paid"),
+    "reward_split": ("per_agent", "total"),
+    "marginal_gain": ("rescore", "frozen"),
+    "cbba_table": ("canonical", "thesis"),
+    "release_order": ("bundle", "path"),
+    "reset_on": ("additions", "any_change"),
+    "quit_block": ("none", "until_change"),
+    "consensus": ("sync", "every_step"),
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskMix:
+    """``count`` tasks needing ``agents`` agents and the equipment multiset ``equipment`` (spec cbga §1.4).
+
+    With equipment and no explicit ``agents``, a task needs one agent per equipment item (|te_j| = L_j, [T3.1.3]).
+    """
+
+    count: int
+    agents: int | None = None
+    equipment: tuple[str, ...] = ()
+
+    @property
+    def required_agents(self) -> int:
+        return self.agents if self.agents is not None else max(1, len(self.equipment))
+
+
+@dataclasses.dataclass(frozen=True)
+class PrerequisiteChains:
+    """``chains`` prerequisite chains of ``length`` tasks each (E3.15: T → B → C, spec cbga §6.3).
+
+    ``followup_window=False`` gives follow-up tasks no time requirement (E3.15 Exp3): their window stays open until
+    the end of the horizon.
+    """
+
+    chains: int
+    length: int = 3
+    followup_window: bool = True
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskAllocConfig:
+    """All settings of one task-allocation environment. Defaults reproduce spec cbga §6.1 with E5.10's L_j = 4."""
+
+    # -- scenario generation (spec cbga §6.1) --
+    n_agents: int = 10
+    n_tasks: int = 20
+    agents_per_task: int | tuple[int, ...] = 4
+    arena: tuple[float, float, float] = (5.0, 5.0, 2.0)
+    speed: float = 20.0
+    units: str = "km_min"
+    reward: float = 100.0
+    time_discount: float = 0.8
+    distance_discount: float = 0.8
+    window: float = 5.0
+    duration: float = 5.0
+    start_time_range: tuple[float, float] = (0.0, 100.0)
+    agent_types: tuple[str, ...] | None = None
+    agent_type_counts: tuple[int, ...] | None = None
+    task_mix: tuple[TaskMix, ...] | None = None
+    prerequisites: PrerequisiteChains | None = None
+    comm_range: float | None = None
+    edge_rule: str = "dist"
+    # -- scoring (spec cbga §1.7, §3.1, §3.2, §10) --
+    distance_cost: str = "from_start"
+    prereq_timing: str = "conservative"
+    reward_split: str = "per_agent"
+    conflict_policy: str = "first_L_paid"
+    marginal_gain: str = "rescore"
+    # -- protocol (spec cbga §3.3–§5.3, §4.2, §4.4) --
+    cbba_table: str = "canonical"
+    prereq_mode: str = "all_have_bid"
+    release_order: str = "bundle"
+    require_known_capacity: bool = False
+    task_quitting: bool = False
+    delta: int = 1
+    reset_on: str = "additions"
+    quit_block: str = "none"
+    consensus: str = "sync"
+    max_bundle: int | None = None
+    max_rounds: int | None = None
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+    def replace(self, **overrides: Any) -> TaskAllocConfig:
+        """A copy with ``overrides`` applied; values are normalised and validated like YAML values."""
+        return from_mapping({**to_mapping(self), **overrides})
+
+    @property
+    def speed_internal(self) -> float:
+        """Speed in arena units per time unit: 20 m/s = 1.2 km/min under ``units=km_min`` (spec cbga §6.1)."""
+        return self.speed * 0.06 if self.units == "km_min" else self.speed
+
+    @property
+    def equipment_names(self) -> tuple[str, ...]:
+        """Equipment universe E in first-seen order (agent types first, then task requirements)."""
+        names: list[str] = list(self.agent_types or ())
+        for mix in self.task_mix or ():
+            names += [e for e in mix.equipment if e not in names]
+        return tuple(names)
+
+
+_FIELDS = {f.name: f for f in dataclasses.fields(TaskAllocConfig)}
+
+
+def _fail(field: str, value: Any, allowed: str) -> None:
+    raise ConfigError(f"config field {field!r}: got {value!r}; allowed: {allowed}")
+
+
+def _check_positive_int(name: str, value: Any, minimum: int = 1) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        _fail(name, value, f"an integer >= {minimum}")
+
+
+def _check_number(name: str, value: Any, minimum: float = 0.0, strict: bool = False) -> None:
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if ok:
+        ok = value > minimum if strict else value >= minimum
+    if not ok:
+        _fail(name, value, f"a finite number {'>' if strict else '>='} {minimum}")
+
+
+def _validate(cfg: TaskAllocConfig) -> None:
+    _check_positive_int("n_agents", cfg.n_agents)
+    _check_positive_int("n_tasks", cfg.n_tasks)
+    apt = cfg.agents_per_task if isinstance(cfg.agents_per_task, tuple) else (cfg.agents_per_task,)
+    if not apt:
+        _fail("agents_per_task", cfg.agents_per_task, "an integer >= 1 or a non-empty list of them")
+    for value in apt:
+        _check_positive_int("agents_per_task", value)
+    if len(cfg.arena) != 3:
+        _fail("arena", cfg.arena, "three sizes [W, W, H]")
+    for size in cfg.arena:
+        _check_number("arena", size, strict=True)
+    for name in ("speed", "reward", "window"):
+        _check_number(name, getattr(cfg, name), strict=True)
+    for name in ("time_discount", "distance_discount", "duration"):
+        _check_number(name, getattr(cfg, name))
+    lo, hi = cfg.start_time_range
+    _check_number("start_time_range", lo, minimum=-math.inf)
+    _check_number("start_time_range", hi, minimum=lo)
+    for name, allowed in CHOICES.items():
+        if getattr(cfg, name) not in allowed:
+            _fail(name, getattr(cfg, name), " | ".join(allowed))
+    if cfg.comm_range is not None:
+        _check_number("comm_range", cfg.comm_range)
+    if cfg.max_bundle is not None:
+        _check_positive_int("max_bundle", cfg.max_bundle)
+    if cfg.max_rounds is not None:
+        _check_positive_int("max_rounds", cfg.max_rounds)
+    for name in ("require_known_capacity", "task_quitting"):
+        if not isinstance(getattr(cfg, name), bool):
+            _fail(name, getattr(cfg, name), "true | false")
+    _check_positive_int("delta", cfg.delta, minimum=0)
+    if cfg.agent_types is not None:
+        if not cfg.agent_types or len(set(cfg.agent_types)) != len(cfg.agent_types) \
+                or not all(isinstance(t, str) and t for t in cfg.agent_types):
+            _fail("agent_types", cfg.agent_types, "null or a list of distinct type names")
+    if cfg.agent_type_counts is not None:
+        if cfg.agent_types is None or len(cfg.agent_type_counts) != len(cfg.agent_types):
+            _fail("agent_type_counts", cfg.agent_type_counts, "one count per entry of agent_types")
+        for count in cfg.agent_type_counts:
+            _check_positive_int("agent_type_counts", count, minimum=0)
+        if sum(cfg.agent_type_counts) != cfg.n_agents:
+            _fail("agent_type_counts", cfg.agent_type_counts,
+                  f"counts summing to n_agents = {cfg.n_agents} (got {sum(cfg.agent_type_counts)})")
+    if cfg.task_mix is not None:
+        for mix in cfg.task_mix:
+            _check_positive_int("task_mix.count", mix.count, minimum=0)
+            if mix.agents is not None:
+                _check_positive_int("task_mix.agents", mix.agents)
+            if mix.equipment and mix.agents is not None and mix.agents < len(mix.equipment):
+                _fail("task_mix.agents", mix.agents, f">= the number of equipment items {len(mix.equipment)}")
+            known = set(cfg.agent_types or ())
+            for item in mix.equipment:
+                if item not in known:
+                    _fail("task_mix.equipment", item, f"a type listed in agent_types: {sorted(known) or 'none'}")
+        total = sum(mix.count for mix in cfg.task_mix)
+        if total != cfg.n_tasks:
+            _fail("task_mix", [dataclasses.asdict(m) for m in cfg.task_mix],
+                  f"counts summing to n_tasks = {cfg.n_tasks} (got {total})")
+    if cfg.prerequisites is not None:
+        chains = cfg.prerequisites
+        _check_positive_int("prerequisites.chains", chains.chains)
+        _check_positive_int("prerequisites.length", chains.length, minimum=2)
+        if chains.chains * chains.length > cfg.n_tasks:
+            _fail("prerequisites", dataclasses.asdict(chains),
+                  f"chains * length <= n_tasks = {cfg.n_tasks}")
+
+
+def _as_tuple(name: str, value: Any) -> tuple:
+    if isinstance(value, (list, tuple)):
+        return tuple(value)
+    _fail(name, value, "a list")
+    raise AssertionError  # unreachable
+
+
+def _normalise(name: str, value: Any) -> Any:
+    """Turn YAML/keyword values into the dataclass field types (lists → tuples, mappings → records)."""
+    if name == "agents_per_task" and isinstance(value, (list, tuple)):
+        return tuple(value)
+    if name in ("arena", "start_time_range"):
+        return tuple(float(v) if isinstance(v, int) and not isinstance(v, bool) else v
+                     for v in _as_tuple(name, value))
+    if name in ("agent_types", "agent_type_counts") and value is not None:
+        return _as_tuple(name, value)
+    if name == "task_mix" and value is not None:
+        mixes = []
+        for entry in _as_tuple(name, value):
+            if isinstance(entry, TaskMix):
+                mixes.append(entry)
+                continue
+            if not isinstance(entry, Mapping):
+                _fail(name, entry, "a list of {count, agents, equipment} mappings")
+            unknown = set(entry) - {"count", "agents", "equipment"}
+            if unknown:
+                _fail(f"task_mix.{sorted(unknown)[0]}", entry, "keys count, agents, equipment")
+            if "count" not in entry:
+                _fail("task_mix.count", entry, "every task_mix entry needs a count")
+            equipment = entry.get("equipment", ())
+            equipment = tuple(equipment) if not isinstance(equipment, str) else tuple(equipment)
+            mixes.append(TaskMix(count=entry["count"], agents=entry.get("agents"), equipment=equipment))
+        return tuple(mixes)
+    if name == "prerequisites" and value is not None:
+        if isinstance(value, PrerequisiteChains):
+            return value
+        if not isinstance(value, Mapping):
+            _fail(name, value, "null or a mapping {chains, length, followup_window}")
+        unknown = set(value) - {"chains", "length", "followup_window"}
+        if unknown:
+            _fail(f"prerequisites.{sorted(unknown)[0]}", value, "keys chains, length, followup_window")
+        if "chains" not in value:
+            _fail("prerequisites.chains", value, "the number of chains is required")
+        return PrerequisiteChains(**value)
+    if name in ("speed", "reward", "time_discount", "distance_discount", "window", "duration", "comm_range") \
+            and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
+def from_mapping(values: Mapping[str, Any]) -> TaskAllocConfig:
+    """Build a config from a flat mapping (YAML contents plus overrides); unknown keys are errors."""
+    unknown = sorted(set(values) - set(_FIELDS))
+    if unknown:
+        raise ConfigError(f"unknown config field(s) {unknown}; known fields: {sorted(_FIELDS)}")
+    kwargs = {name: _normalise(name, value) for name, value in values.items()}
+    return TaskAllocConfig(**kwargs)
+
+
+def to_mapping(cfg: TaskAllocConfig) -> dict[str, Any]:
+    """The flat mapping that ``from_mapping`` reads back (nested records as plain mappings)."""
+    out: dict[str, Any] = {}
+    for name in _FIELDS:
+        value = getattr(cfg, name)
+        if name == "task_mix" and value is not None:
+            value = [{k: v for k, v in dataclasses.asdict(m).items() if v is not None} for m in value]
+            for entry in value:
+                entry["equipment"] = list(entry.get("equipment", ()))
+        elif name == "prerequisites" and value is not None:
+            value = dataclasses.asdict(value)
+        elif isinstance(value, tuple):
+            value = list(value)
+        out[name] = value
+    return out
+
+
+def type_counts(cfg: TaskAllocConfig) -> tuple[int, ...]:
+    """Agents per type: ``agent_type_counts``, or an even split with extras to the first types (E3.14)."""
+    if cfg.agent_type_counts is not None:
+        return cfg.agent_type_counts
+    types: Sequence[str] = cfg.agent_types or ()
+    base, extra = divmod(cfg.n_agents, len(types))
+    return tuple(base + (1 if i < extra else 0) for i in range(len(types)))
+
+
+def resolve_scenario_path(name: str | Path) -> Path:
+    """A scenario name (``default``) or a path to a YAML file."""
+    path = Path(name)
+    if path.suffix in (".yaml", ".yml"):
+        if not path.exists():
+            raise ConfigError(f"scenario file {str(path)!r} does not exist")
+        return path
+    candidate = SCENARIO_DIR / f"{name}.yaml"
+    if not candidate.exists():
+        names = sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
+        raise ConfigError(f"unknown scenario {str(name)!r}; known scenarios: {names}, or a path to a .yaml file")
+    return candidate
+
+
+def load_config(name: str | Path = "default", **overrides: Any) -> TaskAllocConfig:
+    """Read a scenario YAML (by name from ``configs/scenarios`` or by path) and apply keyword overrides."""
+    path = resolve_scenario_path(name)
+    with open(path) as fh:
+        data = yaml.safe_load(fh) or {}
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"scenario file {str(path)!r} must hold a mapping of config fields, got {type(data).__name__}")
+    return from_mapping({**data, **overrides})
+
+
+def resolve_config(scenario: str | Path | TaskAllocConfig | Mapping[str, Any] = "default",
+                   **overrides: Any) -> TaskAllocConfig:
+    """Accept a scenario name, a YAML path, a config object or a mapping, then apply ``overrides``."""
+    if isinstance(scenario, TaskAllocConfig):
+        return scenario.replace(**overrides) if overrides else scenario
+    if isinstance(scenario, Mapping):
+        return from_mapping({**scenario, **overrides})
+    return load_config(scenario, **overrides)
+
+
+def max_required_agents(cfg: TaskAllocConfig) -> int:
+    """The largest L_j any instance of ``cfg`` can have."""
+    if cfg.task_mix:
+        return max(mix.required_agents for mix in cfg.task_mix)
+    apt = cfg.agents_per_task
+    return max(apt) if isinstance(apt, tuple) else apt
+
+
+def round_bound(n_tasks: int, n_agents: int, max_agents_per_task: int, diameter: int) -> int:
+    """T_max = 10 · max(N_m, N_n · max L_j) · D rounds (spec cbga §4.4, [INF])."""
+    return 10 * max(n_tasks, n_agents * max_agents_per_task) * max(1, diameter)

@@ -1,0 +1,96 @@
+"""Phase 2: one synchronous round of message exchange and conflict resolution (spec cbga §4.1–4.3, §2.2, §2.4).
+
+Every agent sends its whole table to each neighbour (a snapshot taken before any processing, so bids propagate
+one hop per round and multi-hop over rounds). A receiver handles its inbox in ascending sender id; single-agent
+tasks go through the CBBA table (``cbba_table.decide``), multi-agent tasks through the two-pass merge
+(``group_merge.merge``). After each message s_i[k] = T; after the inbox, the timestamps of agents heard only
+through neighbours take the freshest neighbour value (2.4).
+
+The receivers at the same inbox position are processed in one vectorised call, which gives exactly the
+sequential per-receiver semantics because receivers never read each other's tables within a round.
+
+Accounting (spec cbga §2.2, §6.2): one message = one (sender, receiver) pair = one communication step; a message
+holds 3·u + N_n data items (u = positive entries of the sender's table); ``data_items_dense`` counts the old
+formats (CBBA vectors 2N_m + N_n when every L_j = 1, otherwise the x and y matrices 2N_mN_n + N_n).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from taskalloc_env.cbba_table import NONE, RESET, UPDATE, decide
+from taskalloc_env.group_merge import Equipment, merge
+from taskalloc_env.knowledge import LocalKnowledge
+from taskalloc_env.network import CommGraph
+
+
+@dataclasses.dataclass(frozen=True)
+class Traffic:
+    """What one round sent: totals and per receiving agent."""
+
+    messages: int
+    informative: int               # messages that changed the receiver's table
+    data_items: int
+    data_items_dense: int
+    received: np.ndarray           # (N,) messages received per agent
+
+
+def exchange(knowledge: LocalKnowledge, graph: CommGraph, now: int, required_agents: np.ndarray,
+             equipment: Equipment, table: str = "canonical") -> Traffic:
+    """Run one round of Phase 2 on every agent's table in place; returns the round's traffic."""
+    kn = knowledge
+    n, _, m = kn.bids.shape
+    agents = np.arange(n)
+    kn.timestamps[agents, agents] = now
+    sent_bids = kn.bids.copy()
+    sent_winner = kn.winner.copy()
+    sent_winning_bid = kn.winning_bid()
+    sent_stamps = kn.timestamps.copy()
+    sent_agents = (sent_bids > 0).any(axis=2)                  # agents named in each sender's triples
+    single_idx = np.flatnonzero(kn.single)
+    multi_idx = np.flatnonzero(~kn.single)
+    multi_eq = equipment.subset(multi_idx)
+    informative = np.zeros(n, dtype=np.int64)
+
+    for receivers, senders in graph.inbox:
+        s_i = kn.timestamps[receivers]
+        s_k = sent_stamps[senders]
+        changed = np.zeros(len(receivers), dtype=bool)
+        if single_idx.size:
+            z_i = kn.winner[receivers][:, single_idx]
+            y_i = np.where(z_i == NONE, 0.0, kn.bids[receivers[:, None], np.maximum(z_i, 0), single_idx[None, :]])
+            z_k = sent_winner[senders][:, single_idx]
+            y_k = sent_winning_bid[senders][:, single_idx]
+            action = decide(receivers, senders, z_i, y_i, z_k, y_k, s_i, s_k, table)
+            new_z = np.where(action == UPDATE, z_k, np.where(action == RESET, NONE, z_i))
+            new_y = np.where(action == UPDATE, y_k, np.where(action == RESET, 0.0, y_i))
+            diff = (new_z != z_i) | (new_y != y_i)
+            r, j = np.nonzero(diff)
+            kn.set_single_columns(receivers[r], single_idx[j], new_z[r, j], new_y[r, j])
+            changed |= diff.any(axis=1)
+        if multi_idx.size:
+            block = np.ix_(receivers, agents, multi_idx)
+            before = kn.bids[block]
+            after = merge(before, sent_bids[np.ix_(senders, agents, multi_idx)], receivers, senders, s_i, s_k,
+                          required_agents[multi_idx], multi_eq)
+            diff = (after != before).any(axis=(1, 2))
+            if diff.any():
+                kn.bids[block] = after
+            changed |= diff
+        kn.timestamps[receivers, senders] = now
+        kn.known[receivers] |= sent_agents[senders]
+        kn.known[receivers, senders] = True
+        informative[receivers] += changed
+
+    relayed = np.where(graph.adjacency[:, :, None], sent_stamps[None, :, :], -np.inf).max(axis=1)
+    np.maximum(kn.timestamps, relayed, out=kn.timestamps)
+    kn.timestamps[agents, agents] = now
+
+    messages = int(graph.degree.sum())
+    positive = (sent_bids > 0).sum(axis=(1, 2))
+    items = int((graph.degree * (3 * positive + n)).sum())
+    dense_size = 2 * m + n if kn.single.all() else 2 * m * n + n
+    return Traffic(messages=messages, informative=int(informative.sum()), data_items=items,
+                   data_items_dense=messages * dense_size, received=graph.degree.copy())

@@ -1,0 +1,338 @@
+"""TaskAlloc: decentralised multi-agent task allocation as a PettingZoo parallel environment.
+
+Create it with ``pettingzoo.make("parallel", "taskalloc/TaskAlloc-v0", ...)`` (or ``"aec"``), or
+``taskalloc_env.taskalloc_v0.parallel_env(...)``.
+
+=====================  ==============================================================================
+Agents                 ``uav_0 … uav_{N-1}`` (N = ``n_agents``, default 10)
+Parallel API           yes (AEC through ``parallel_to_aec``)
+Action space           ``Discrete(1 + 2M)``: 0 pass, 1..M bid on task j−1, M+1..2M quit task j−M−1
+Observation space      ``Dict(observation=Box(D,) float64, action_mask=Box(0, 1, (1 + 2M,), int8))``
+State space            ``Box`` of agent/task attributes, every agent's own bids and the round
+Reward                 cooperative, potential-based: every agent gets Δ team score (÷ ``reward_scale``)
+Termination            the allocation converged (no table changed for D + 1 rounds, spec cbga §4.4)
+Truncation             ``max_cycles`` steps, or the round bound T_max (``max_rounds``)
+=====================  ==============================================================================
+
+Each step is one decision per agent in the bundle phase of CBGA (spec cbga §3): *bid* on a task (inserted at the
+agent's best path slot, the bid being its marginal gain (3.11)), *quit* a multi-agent task (§5.3, only with
+``task_quitting``), or *pass*. The consensus protocol between agents is the environment's dynamics
+(``consensus="sync"``: once every agent has passed, the network exchanges messages and agents release what they
+were outbid on; ``"every_step"``: after every step). The action mask allows exactly the bids the protocol deems
+valid (eligibility and the outbid test h_ij) and the quits it allows; a passed agent may only pass until the
+round ends.
+
+Constructor arguments: ``scenario`` (a name from ``configs/scenarios``, a YAML path, a
+:class:`~taskalloc_env.config.TaskAllocConfig`, a mapping, or a fixed :class:`~taskalloc_env.scenario.Scenario`),
+``max_cycles`` (steps before truncation; None: only the round bound), ``render_mode`` (``ansi``, ``rgb_array``,
+``human``), ``invalid_action`` (``raise``: bad input raises; ``noop``: it becomes a pass, flagged in infos),
+``reward_scale`` (rewards are Δscore / reward_scale), ``render_path`` (where ``human`` saves its figure; None shows
+it), and any config field as a keyword override (``n_agents=10, n_tasks=20, agents_per_task=4, comm_range=None``).
+
+Observation: agent i's own features and, per task, features of *its own* table (marginal gain, L_j, members,
+lowest member bid, group total, displaced bid, in bundle, quit before, rounds since the group changed, equipment
+match, prerequisites met, window, relative position); ``ObservationLayout`` names the columns. The episode
+return equals ``evaluate().score / reward_scale``.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from pettingzoo import ParallelEnv
+
+from taskalloc_env.allocation import Allocation
+from taskalloc_env.config import TaskAllocConfig, max_required_agents, resolve_config, round_bound
+from taskalloc_env.observation import ObservationBuilder, state_vector
+from taskalloc_env.protocol import Protocol
+from taskalloc_env.render import ansi_table, figure, rgb_array
+from taskalloc_env.scenario import Scenario, generate
+
+PASS = 0
+INVALID_ACTION_MODES = ("raise", "noop")
+
+
+class InvalidActionError(ValueError):
+    """An action outside the mask, a missing or unknown agent, or a step after the episode ended."""
+
+
+class TaskAllocEnv(ParallelEnv):
+    """The parallel environment; see the module docstring for the card."""
+
+    metadata = {"name": "taskalloc_v0", "render_modes": ["ansi", "rgb_array", "human"], "is_parallelizable": True,
+                "render_fps": 2}
+
+    def __init__(self, scenario: str | Path | TaskAllocConfig | Mapping[str, Any] | Scenario = "default",
+                 max_cycles: int | None = None, render_mode: str | None = None, invalid_action: str = "raise",
+                 reward_scale: float = 1.0, render_path: str | Path | None = None, **overrides: Any) -> None:
+        if isinstance(scenario, Scenario):
+            self.fixed_scenario: Scenario | None = scenario
+            counts = {"n_agents": scenario.n_agents, "n_tasks": scenario.n_tasks}
+            clash = {k: v for k, v in counts.items() if k in overrides and overrides[k] != v}
+            if clash:
+                raise ValueError(f"overrides {clash} contradict the fixed scenario's {counts}")
+            self.config = resolve_config("default", **{**overrides, **counts})
+        else:
+            self.fixed_scenario = None
+            self.config = resolve_config(scenario, **overrides)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']} or None")
+        if invalid_action not in INVALID_ACTION_MODES:
+            raise ValueError(f"invalid_action {invalid_action!r} is not one of {INVALID_ACTION_MODES}")
+        if max_cycles is not None and (isinstance(max_cycles, bool) or not isinstance(max_cycles, int)
+                                       or max_cycles < 1):
+            raise ValueError(f"max_cycles must be a positive integer or None, got {max_cycles!r}")
+        if not reward_scale > 0:
+            raise ValueError(f"reward_scale must be > 0, got {reward_scale!r}")
+        self.render_mode = render_mode
+        self.render_path = Path(render_path) if render_path is not None else None
+        self.max_cycles = max_cycles
+        self.invalid_action = invalid_action
+        self.reward_scale = float(reward_scale)
+        n, m = self.config.n_agents, self.config.n_tasks
+        self.possible_agents = [f"uav_{i}" for i in range(n)]
+        self.agent_index = {a: i for i, a in enumerate(self.possible_agents)}
+        self.agents: list[str] = []
+        self._np_random, self._np_random_seed = seeding.np_random()
+        self._protocol: Protocol | None = None
+        self._window = None
+        # spaces depend only on counts and on bounds that hold for every instance, so they are built once
+        probe = self.fixed_scenario or generate(self.config, np.random.default_rng(0))
+        probe_protocol = Protocol(probe, self.config)
+        if self.fixed_scenario is not None:
+            self._max_agents_per_task = int(probe.task_agents.max())
+            self._max_rounds = probe_protocol.max_rounds
+        else:
+            self._max_agents_per_task = max_required_agents(self.config)
+            diameter = 1 if self.config.comm_range is None else max(1, n - 1)
+            self._max_rounds = self.config.max_rounds or round_bound(m, n, self._max_agents_per_task, diameter)
+        builder = ObservationBuilder(probe_protocol, self._max_agents_per_task, self._max_rounds)
+        self.observation_layout = builder.layout
+        self._observation_space = spaces.Dict({
+            "observation": builder.space(),
+            "action_mask": spaces.Box(0, 1, (1 + 2 * m,), dtype=np.int8),
+        })
+        self._action_space = spaces.Discrete(1 + 2 * m)
+        state_size = len(state_vector(probe_protocol))
+        self.state_space = spaces.Box(-np.inf, np.inf, (state_size,), dtype=np.float64)
+
+    # -- spaces ------------------------------------------------------------------------------------------------
+    @functools.cache  # noqa: B019 - one space object per agent, as parallel_api_test requires
+    def observation_space(self, agent: str) -> spaces.Dict:
+        self._check_agent_name(agent)
+        return self._observation_space
+
+    @functools.cache  # noqa: B019
+    def action_space(self, agent: str) -> spaces.Discrete:
+        self._check_agent_name(agent)
+        return self._action_space
+
+    def _check_agent_name(self, agent: str) -> None:
+        if agent not in self.agent_index:
+            raise KeyError(f"unknown agent {agent!r}; agents are {self.possible_agents[0]} … {self.possible_agents[-1]}")
+
+    # -- episode -------------------------------------------------------------------------------------------------
+    @property
+    def protocol(self) -> Protocol:
+        if self._protocol is None:
+            raise RuntimeError("call reset() before using the environment")
+        return self._protocol
+
+    @property
+    def scenario(self) -> Scenario:
+        """The current instance (arrays of agent and task attributes)."""
+        return self.protocol.scenario
+
+    @property
+    def np_random(self) -> np.random.Generator:
+        return self._np_random
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        if seed is not None:
+            self._np_random, self._np_random_seed = seeding.np_random(seed)
+        scenario = self.fixed_scenario or generate(self.config, self._np_random)
+        self._protocol = Protocol(scenario, self.config)
+        self._builder = ObservationBuilder(self._protocol, self._max_agents_per_task, self._max_rounds)
+        self.agents = list(self.possible_agents)
+        self._passed = np.zeros(len(self.possible_agents), dtype=bool)
+        self._steps = 0
+        self._last_score = 0.0
+        self._done = False
+        observations = self._observations()
+        infos = self._infos({})
+        return observations, infos
+
+    def step(self, actions: Mapping[str, Any]):
+        if self._done or not self.agents:
+            if self.invalid_action == "noop":
+                return {}, {}, {}, {}, {}
+            raise InvalidActionError("step() called after the episode ended; call reset() first")
+        protocol = self.protocol
+        flags: dict[str, str] = {}
+        decisions = self._read_actions(actions, flags)
+        view = protocol.view()
+        for i, action in decisions:
+            m = self.config.n_tasks
+            if action == PASS:
+                self._passed[i] = True
+            elif action <= m:
+                protocol.bid(i, action - 1, view=view)
+                self._passed[i] = False
+            else:
+                protocol.quit(i, action - m - 1)
+                self._passed[i] = False
+        self._steps += 1
+        round_over = self.config.consensus == "every_step" or bool(self._passed.all())
+        if round_over:
+            protocol.end_round()
+            self._passed[:] = False
+        score = protocol.score().score
+        reward = (score - self._last_score) / self.reward_scale
+        self._last_score = score
+        terminated = protocol.converged
+        truncated = not terminated and (
+            (self.max_cycles is not None and self._steps >= self.max_cycles)
+            or protocol.round >= protocol.max_rounds)
+        agents = list(self.agents)
+        observations = self._observations()
+        rewards = {a: reward for a in agents}
+        terminations = {a: terminated for a in agents}
+        truncations = {a: truncated for a in agents}
+        infos = self._infos(flags)
+        if terminated or truncated:
+            self._done = True
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return observations, rewards, terminations, truncations, infos
+
+    def _read_actions(self, actions: Mapping[str, Any], flags: dict[str, str]) -> list[tuple[int, int]]:
+        """Validate the action dict against the live agents and their masks; apply ``invalid_action``."""
+        if not isinstance(actions, Mapping):
+            raise InvalidActionError(f"actions must be a dict agent -> action, got {type(actions).__name__}")
+        unknown = [a for a in actions if a not in self.agent_index or a not in self.agents]
+        if unknown:
+            message = f"actions for unknown or finished agents {unknown}; live agents: {self.agents}"
+            if self.invalid_action == "raise":
+                raise InvalidActionError(message)
+            for a in self.agents:
+                flags[a] = message
+        masks = self._builder.action_masks(self.protocol, self._passed)
+        decisions = []
+        for agent in self.agents:
+            i = self.agent_index[agent]
+            if agent not in actions:
+                problem = f"no action given for {agent}"
+                action = None
+            else:
+                action, problem = self._check_action(agent, actions[agent], masks[i])
+            if problem:
+                if self.invalid_action == "raise":
+                    raise InvalidActionError(problem)
+                flags[agent] = problem
+                action = PASS
+            decisions.append((i, action))
+        return decisions
+
+    def _check_action(self, agent: str, raw: Any, mask: np.ndarray) -> tuple[int | None, str | None]:
+        try:
+            action = int(raw)
+        except (TypeError, ValueError):
+            return None, f"action {raw!r} of {agent} is not an integer"
+        if action != raw or not 0 <= action < len(mask):
+            return None, f"action {raw!r} of {agent} is outside Discrete({len(mask)})"
+        if not mask[action]:
+            return None, f"action {action} ({self.describe_action(action)}) of {agent} is not allowed by its mask: " \
+                         f"{self._why_masked(agent, action)}"
+        return action, None
+
+    def _why_masked(self, agent: str, action: int) -> str:
+        i, m = self.agent_index[agent], self.config.n_tasks
+        if self._passed[i]:
+            return "the agent passed this round and may only pass until the round ends"
+        if action <= m:
+            return self.protocol.explain_bid(i, action - 1)
+        return "quitting needs task_quitting on, L_j > 1, membership, an incomplete group, no earlier quit, " \
+               f"and T − H > delta = {self.config.delta}"
+
+    def describe_action(self, action: int) -> str:
+        """``pass``, ``bid on task j`` or ``quit task j``."""
+        m = self.config.n_tasks
+        if action == PASS:
+            return "pass"
+        return f"bid on task {action - 1}" if action <= m else f"quit task {action - m - 1}"
+
+    # -- outputs ---------------------------------------------------------------------------------------------------
+    def _observations(self) -> dict[str, dict[str, np.ndarray]]:
+        obs = self._builder.build(self.protocol, self._passed)
+        masks = self._builder.action_masks(self.protocol, self._passed)
+        return {a: {"observation": obs[self.agent_index[a]], "action_mask": masks[self.agent_index[a]]}
+                for a in self.agents}
+
+    def _infos(self, flags: dict[str, str]) -> dict[str, dict[str, Any]]:
+        p = self.protocol
+        ts = p.score()
+        figures = {"score": ts.score, "valid_tasks": int(ts.valid.sum()), "conflicts": int(ts.conflicts.sum()),
+                   "round": p.round, "messages": p.counters.messages, "data_items": p.counters.data_items,
+                   "converged": p.converged}
+        infos = {}
+        for a in self.agents:
+            info = dict(figures)
+            info["passed"] = bool(self._passed[self.agent_index[a]])
+            if a in flags:
+                info["invalid_action"] = flags[a]
+            infos[a] = info
+        return infos
+
+    def state(self) -> np.ndarray:
+        return state_vector(self.protocol)
+
+    def evaluate(self) -> Allocation:
+        """The allocation as it stands: paths with start times, groups, valid tasks, conflicts, score, traffic."""
+        p = self.protocol
+        c = p.counters
+        return Allocation.from_paths(p.model, p.knowledge.paths, self.config.conflict_policy,
+                                     schedules=p.schedules, rounds=c.rounds, messages=c.messages,
+                                     informative_messages=c.informative_messages, data_items=c.data_items,
+                                     bids=c.bids, quits=c.quits, converged=p.converged, agreement=p.agreement())
+
+    def render(self):
+        if self.render_mode is None:
+            raise ValueError("render() needs a render_mode: 'ansi', 'rgb_array' or 'human'")
+        allocation = self.evaluate()
+        if self.render_mode == "ansi":
+            return ansi_table(self.scenario, allocation)
+        if self.render_mode == "rgb_array":
+            return rgb_array(self.scenario, allocation)
+        if self.render_path is not None:
+            figure(self.scenario, allocation).savefig(self.render_path)
+        elif _interactive_backend():
+            import matplotlib.pyplot as plt
+            if self._window is None:
+                self._window = plt.figure("taskalloc")
+            self._window.clf()
+            ax = self._window.add_subplot(1, 1, 1)
+            ax.imshow(rgb_array(self.scenario, allocation))
+            ax.axis("off")
+            plt.pause(0.001)
+        return None
+
+    def close(self) -> None:
+        if self._window is not None:
+            import matplotlib.pyplot as plt
+            plt.close(self._window)
+            self._window = None
+
+
+def _interactive_backend() -> bool:
+    """Whether matplotlib can open a window here (``human`` shows the figure only then)."""
+    import matplotlib
+    from matplotlib.backends import BackendFilter, backend_registry
+
+    return matplotlib.get_backend().lower() in backend_registry.list_builtin(BackendFilter.INTERACTIVE)

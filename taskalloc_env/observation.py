@@ -1,0 +1,188 @@
+"""Observations built from each agent's *local* knowledge only, and the global state for centralised critics.
+
+An agent's observation vector is ``[own features | task 0 features | … | task M−1 features]``. Bid-like values
+are divided by the largest task reward c̄, so the gain, the group total and the displaced bid add up to the team
+value of spec cbga §5.2 in the same unit. ``ObservationLayout`` names every column so policies (scripted or
+learned) can slice the vector without magic numbers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from gymnasium import spaces
+
+from taskalloc_env.protocol import Protocol
+
+OWN_FEATURES = ("x", "y", "z", "speed", "bundle_size", "round", "passed")
+TASK_FEATURES = (
+    "gain",               # c_ij / c̄ (3.11)
+    "can_bid",            # the bid action is valid
+    "outbid",             # h_ij (3.12)–(3.14)
+    "required_agents",    # L_j / N
+    "members",            # known members / L_j
+    "lowest_bid",         # lowest member bid / c̄
+    "group_total",        # Σ_k X_i[k][j] / c̄ (4.2)
+    "displaced_bid",      # bid of the member a bid would displace / c̄
+    "in_bundle",
+    "own_bid",            # X_i[i][j] / c̄
+    "quit_before",        # Q_i[j]
+    "can_quit",
+    "rounds_since_change",  # T − H_i[j] for held tasks: rounds since assigned or since the group last grew
+    "equipment_match",
+    "prereqs_met",
+    "window_start",       # start_j / horizon
+    "window_end",         # min(end_j, horizon) / horizon
+    "dx", "dy", "dz",     # task position relative to the agent's start / arena
+    "distance",           # distance from the agent's start / arena diagonal
+    "group_complete",     # L_j members in i's table
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class ObservationLayout:
+    """Column positions of the observation vector."""
+
+    n_tasks: int
+    n_equipment: int
+
+    @property
+    def own_names(self) -> tuple[str, ...]:
+        return OWN_FEATURES + tuple(f"equipment_{e}" for e in range(self.n_equipment))
+
+    @property
+    def own_size(self) -> int:
+        return len(self.own_names)
+
+    @property
+    def task_size(self) -> int:
+        return len(TASK_FEATURES)
+
+    @property
+    def size(self) -> int:
+        return self.own_size + self.n_tasks * self.task_size
+
+    def task_column(self, name: str) -> int:
+        return TASK_FEATURES.index(name)
+
+    def split(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(…, D) → own (…, own_size) and tasks (…, M, task_size)."""
+        own = obs[..., : self.own_size]
+        tasks = obs[..., self.own_size:].reshape(*obs.shape[:-1], self.n_tasks, self.task_size)
+        return own, tasks
+
+    def task_feature(self, obs: np.ndarray, name: str) -> np.ndarray:
+        """(…, M) one feature of every task."""
+        return self.split(obs)[1][..., self.task_column(name)]
+
+    def bounds(self, max_agents_per_task: int, max_rounds: int) -> tuple[np.ndarray, np.ndarray]:
+        own_low = np.zeros(self.own_size)
+        own_low[:3] = -1.0                       # positions / arena; explicit scenarios may sit below 0
+        own_high = np.ones(self.own_size)
+        task_low = np.zeros(self.task_size)
+        task_high = np.ones(self.task_size)
+        task_high[self.task_column("group_total")] = max_agents_per_task
+        task_high[self.task_column("rounds_since_change")] = max_rounds
+        for name in ("dx", "dy", "dz"):
+            task_low[self.task_column(name)] = -2.0
+            task_high[self.task_column(name)] = 2.0
+        task_high[self.task_column("distance")] = 2.0
+        low = np.concatenate([own_low, np.tile(task_low, self.n_tasks)])
+        high = np.concatenate([own_high, np.tile(task_high, self.n_tasks)])
+        return low, high
+
+
+class ObservationBuilder:
+    """Builds every agent's observation from the protocol's local tables, vectorised over agents."""
+
+    def __init__(self, protocol: Protocol, max_agents_per_task: int, max_rounds: int) -> None:
+        """``max_agents_per_task`` and ``max_rounds`` bound every instance the env can draw (for the space)."""
+        s = protocol.scenario
+        self.layout = ObservationLayout(s.n_tasks, len(s.equipment_names))
+        self.low, self.high = self.layout.bounds(max_agents_per_task, max_rounds)
+        self.reward_unit = float(s.task_reward.max()) or 1.0
+        finite_end = s.task_end[np.isfinite(s.task_end)]
+        self.horizon = float(finite_end.max()) if finite_end.size and finite_end.max() > 0 else 1.0
+        self.arena = np.asarray(s.arena, dtype=float)
+        self.diagonal = float(np.linalg.norm(self.arena))
+        self.max_speed = float(s.agent_speed.max())
+        self._static = self._static_task_features(protocol)
+
+    def space(self) -> spaces.Box:
+        return spaces.Box(self.low, self.high, dtype=np.float64)
+
+    def _static_task_features(self, protocol: Protocol) -> np.ndarray:
+        s = protocol.scenario
+        f = np.zeros((s.n_agents, s.n_tasks, self.layout.task_size))
+        col = self.layout.task_column
+        f[:, :, col("required_agents")] = s.task_agents[None, :] / s.n_agents
+        f[:, :, col("window_start")] = np.clip(s.task_start / self.horizon, 0, 1)[None, :]
+        f[:, :, col("window_end")] = np.clip(np.minimum(s.task_end, self.horizon) / self.horizon, 0, 1)[None, :]
+        rel = (s.task_pos[None, :, :] - s.agent_pos[:, None, :]) / self.arena
+        f[:, :, col("dx")], f[:, :, col("dy")], f[:, :, col("dz")] = rel[..., 0], rel[..., 1], rel[..., 2]
+        f[:, :, col("distance")] = protocol.model.dist_agent_task / self.diagonal
+        f[:, :, col("equipment_match")] = protocol.equipment_match
+        return f
+
+    def build(self, protocol: Protocol, passed: np.ndarray) -> np.ndarray:
+        """(N, D) observations; row i uses only agent i's table, path and flags."""
+        s = protocol.scenario
+        kn = protocol.knowledge
+        view = protocol.view()
+        unit = self.reward_unit
+        col = self.layout.task_column
+        f = self._static.copy()
+        f[:, :, col("gain")] = view.gain / unit
+        f[:, :, col("can_bid")] = view.can_bid
+        f[:, :, col("outbid")] = view.outbid
+        f[:, :, col("members")] = view.members / s.task_agents[None, :]
+        f[:, :, col("lowest_bid")] = view.lowest_bid / unit
+        f[:, :, col("group_total")] = view.group_total / unit
+        f[:, :, col("displaced_bid")] = view.displaced_bid / unit
+        f[:, :, col("in_bundle")] = view.in_bundle
+        f[:, :, col("own_bid")] = kn.own_bids() / unit
+        f[:, :, col("quit_before")] = kn.quit
+        f[:, :, col("can_quit")] = protocol.quit_options()
+        f[:, :, col("rounds_since_change")] = np.where(view.in_bundle, protocol.round - kn.assigned_at, 0)
+        f[:, :, col("prereqs_met")] = view.prereqs_met
+        f[:, :, col("group_complete")] = view.members == s.task_agents[None, :]
+        own = np.zeros((s.n_agents, self.layout.own_size))
+        own[:, :3] = s.agent_pos / self.arena
+        own[:, 3] = s.agent_speed / self.max_speed
+        own[:, 4] = [len(b) / s.n_tasks for b in kn.bundles]
+        own[:, 5] = min(protocol.round / protocol.max_rounds, 1.0)
+        own[:, 6] = passed
+        own[:, len(OWN_FEATURES):] = s.agent_equipment
+        return np.concatenate([own, f.reshape(s.n_agents, -1)], axis=1)
+
+    def action_masks(self, protocol: Protocol, passed: np.ndarray) -> np.ndarray:
+        """(N, 1 + 2M) int8: pass always; bids on valid tasks; quits the protocol allows. Passed agents may only pass."""
+        view = protocol.view()
+        n, m = view.gain.shape
+        mask = np.zeros((n, 1 + 2 * m), dtype=np.int8)
+        mask[:, 0] = 1
+        mask[:, 1: m + 1] = view.can_bid
+        mask[:, m + 1:] = protocol.quit_options()
+        mask[passed, 1:] = 0
+        return mask
+
+
+def state_vector(protocol: Protocol) -> np.ndarray:
+    """Global view: agent and task attributes, every agent's own row of bids (ground truth) and the round."""
+    s = protocol.scenario
+    arena = np.asarray(s.arena, dtype=float)
+    unit = float(s.task_reward.max()) or 1.0
+    finite_end = s.task_end[np.isfinite(s.task_end)]
+    horizon = float(finite_end.max()) if finite_end.size and finite_end.max() > 0 else 1.0
+    parts = [
+        (s.agent_pos / arena).ravel(),
+        s.agent_equipment.astype(float).ravel(),
+        (s.task_pos / arena).ravel(),
+        np.clip(s.task_start / horizon, 0, 1),
+        np.clip(np.minimum(s.task_end, horizon) / horizon, 0, 1),
+        s.task_agents / s.n_agents,
+        (protocol.knowledge.own_bids() / unit).ravel(),
+        [min(protocol.round / protocol.max_rounds, 1.0)],
+    ]
+    return np.concatenate([np.asarray(p, dtype=float).ravel() for p in parts])

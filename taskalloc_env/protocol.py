@@ -1,0 +1,247 @@
+"""CBGA's two phases over all agents' local knowledge, driven one decision at a time (spec cbga §3–§5).
+
+The environment calls ``bid`` and ``quit`` for the agents' decisions in the bundle phase, and ``end_round`` when
+the round is over. ``end_round`` is Phase 2 and the clean-up of spec cbga §4.4:
+
+    T += 1; exchange (consensus.exchange); outbid release (§3.8); quit timers (Alg 9 lines 4–5);
+    convergence: no table or bundle changed for D + 1 consecutive rounds (and no quit timer still running).
+
+Task quitting is part of the protocol when ``task_quitting`` is on: agent i may quit j only if L_j > 1, i is a
+member, it never quit j (Q_i[j] = 0), the group is incomplete in its view and the group-synchronised timer has
+run out (T − H_i[j] > δ, ``delta``). Which bids and quits to make is the policy's choice.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from taskalloc_env.bidding import BidView, bid_view
+from taskalloc_env.cbba_table import NONE
+from taskalloc_env.config import TaskAllocConfig, round_bound
+from taskalloc_env.consensus import Traffic, exchange
+from taskalloc_env.group_merge import Equipment
+from taskalloc_env.knowledge import NEVER, LocalKnowledge
+from taskalloc_env.network import CommGraph
+from taskalloc_env.scenario import Scenario
+from taskalloc_env.scoring import Schedule, ScoringModel, TeamScore, team_score
+
+
+class ProtocolError(ValueError):
+    """A decision the protocol does not allow (a bid that is not valid, a quit that is not allowed)."""
+
+
+@dataclasses.dataclass
+class Counters:
+    """Cumulative figures of one run (spec cbga §6.2)."""
+
+    rounds: int = 0
+    messages: int = 0
+    informative_messages: int = 0
+    data_items: int = 0
+    data_items_dense: int = 0
+    bids: int = 0
+    quits: int = 0
+    released: int = 0
+
+
+class Protocol:
+    """All agents' tables plus the rules that change them."""
+
+    def __init__(self, scenario: Scenario, cfg: TaskAllocConfig) -> None:
+        self.scenario = scenario
+        self.cfg = cfg
+        self.model = ScoringModel(scenario, distance_cost=cfg.distance_cost, prereq_timing=cfg.prereq_timing,
+                                  reward_split=cfg.reward_split, marginal_gain=cfg.marginal_gain)
+        self.graph = CommGraph(scenario.agent_pos, cfg.comm_range, cfg.edge_rule)
+        self.equipment = Equipment(scenario.agent_equipment, scenario.task_equipment)
+        self.equipment_match = scenario.eligible()
+        self.max_bundle = cfg.max_bundle or scenario.n_tasks
+        self.max_rounds = cfg.max_rounds or round_bound(scenario.n_tasks, scenario.n_agents,
+                                                        int(scenario.task_agents.max()), self.graph.diameter)
+        self.reset()
+
+    def reset(self) -> None:
+        s = self.scenario
+        self.knowledge = LocalKnowledge.empty(s.n_agents, s.n_tasks, s.task_agents == 1,
+                                              know_everyone=not self.cfg.require_known_capacity)
+        self.round = 0
+        self.counters = Counters()
+        self.received = np.zeros(s.n_agents, dtype=np.int64)
+        self.stable_rounds = 0
+        self.converged = False
+        self._schedules: list[Schedule] = [self.model.schedule(i, []) for i in range(s.n_agents)]
+        self._gain = np.zeros((s.n_agents, s.n_tasks))
+        self._slot = np.full((s.n_agents, s.n_tasks), -1, dtype=np.int64)
+        self._dirty = set(range(s.n_agents))
+        self._view: BidView | None = None
+        self._score: TeamScore | None = None
+        self._last_bids = self.knowledge.bids.copy()
+        self._last_bundles: list[list[int]] = [[] for _ in range(s.n_agents)]
+
+    # -- cached derived state ------------------------------------------------------------------------------------
+    def _touch(self, agent: int | None = None) -> None:
+        if agent is not None:
+            self._dirty.add(agent)
+        self._view = None
+        self._score = None
+
+    def _refresh_paths(self) -> None:
+        for i in sorted(self._dirty):
+            self._schedules[i] = self.model.schedule(i, self.knowledge.paths[i])
+            self._gain[i], self._slot[i] = self.model.insertion_gains(i, self.knowledge.paths[i], self._schedules[i])
+        self._dirty.clear()
+
+    @property
+    def schedules(self) -> list[Schedule]:
+        self._refresh_paths()
+        return self._schedules
+
+    def view(self) -> BidView:
+        """The bidding situation of every agent (cached until the next change)."""
+        if self._view is None:
+            self._refresh_paths()
+            self._view = bid_view(self.knowledge, self.scenario, self.equipment, self.equipment_match,
+                                  self._gain.copy(), self._slot.copy(), prereq_mode=self.cfg.prereq_mode,
+                                  require_known_capacity=self.cfg.require_known_capacity,
+                                  max_bundle=self.max_bundle)
+        return self._view
+
+    def score(self) -> TeamScore:
+        """The team score of the allocation as it stands: each agent's own path (spec cbga §1.7)."""
+        if self._score is None:
+            self._score = team_score(self.model, self.schedules, self.cfg.conflict_policy)
+        return self._score
+
+    # -- Phase 1 decisions ---------------------------------------------------------------------------------------
+    def quit_options(self) -> np.ndarray:
+        """(N, M) quits the protocol allows now (spec cbga §5.3 conditions 1–4 and 6)."""
+        kn = self.knowledge
+        if not self.cfg.task_quitting:
+            return np.zeros(kn.quit.shape, dtype=bool)
+        counts = kn.member_counts()
+        return ((self.scenario.task_agents > 1)[None, :] & (kn.own_bids() > 0) & ~kn.quit
+                & (counts < self.scenario.task_agents[None, :])
+                & (self.round - kn.assigned_at > self.cfg.delta))
+
+    def bid(self, agent: int, task: int, view: BidView | None = None) -> float:
+        """Agent ``agent`` bids c_ij on ``task`` at its best slot (Alg 5 lines 21–26); returns the bid.
+
+        ``view`` may be a view computed earlier in the same step: a bid only changes the bidder's own row, so the
+        other agents' rows stay valid.
+        """
+        view = view if view is not None else self.view()
+        if not view.can_bid[agent, task]:
+            raise ProtocolError(f"agent {agent} has no valid bid on task {task} ({self.explain_bid(agent, task)})")
+        kn = self.knowledge
+        displaced = int(view.displaced[agent, task])
+        if displaced != NONE:           # keep n_j ≤ L_j locally; Phase 2 propagates the eviction (spec cbga §3.6)
+            kn.set_bid(agent, displaced, task, 0.0)
+        value = float(view.gain[agent, task])
+        kn.add_to_bundle(agent, task, int(view.slot[agent, task]), value, self.round)
+        self.counters.bids += 1
+        self._touch(agent)
+        return value
+
+    def explain_bid(self, agent: int, task: int) -> str:
+        """Why a bid is not valid, in the words of spec cbga §3.3–3.4."""
+        v = self.view()
+        reasons = []
+        if v.in_bundle[agent, task]:
+            reasons.append("the task is already in its bundle")
+        if not v.equipment_match[agent, task]:
+            reasons.append("its equipment does not match te_j")
+        if not v.prereqs_met[agent, task]:
+            reasons.append(f"prerequisites are not met ({self.cfg.prereq_mode})")
+        if v.gain[agent, task] <= 0:
+            reasons.append("no feasible insertion with a positive marginal gain")
+        if not v.outbid[agent, task]:
+            reasons.append("it cannot outbid the current winners")
+        if not reasons and not v.eligible[agent, task]:
+            reasons.append("blocked by quit_block, require_known_capacity or max_bundle")
+        return "; ".join(reasons)
+
+    def quit(self, agent: int, task: int) -> list[int]:
+        """Agent quits ``task`` (Alg 9 lines 6–8) and releases what follows it; returns the released tasks."""
+        if not self.quit_options()[agent, task]:
+            raise ProtocolError(f"agent {agent} may not quit task {task}: quitting needs task_quitting on, "
+                                "L_j > 1, membership, an incomplete group, no earlier quit of this task, "
+                                f"and T − H > delta = {self.cfg.delta}")
+        kn = self.knowledge
+        released = kn.release(agent, task, self.cfg.release_order)
+        kn.quit[agent, task] = True
+        if self.cfg.quit_block == "until_change":
+            kn.quit_members[agent, task] = int((kn.bids[agent, :, task] > 0).sum())
+        self.counters.quits += 1
+        self.counters.released += len(released)
+        self._touch(agent)
+        return released
+
+    # -- Phase 2 and clean-up ------------------------------------------------------------------------------------
+    def end_round(self) -> Traffic:
+        """Exchange, outbid release, quit timers and the convergence test (spec cbga §4.4)."""
+        kn = self.knowledge
+        self.round += 1
+        before = kn.bids.copy()
+        traffic = exchange(kn, self.graph, self.round, self.scenario.task_agents, self.equipment,
+                           self.cfg.cbba_table)
+        self._release_outbid()
+        if self.cfg.task_quitting:
+            self._reset_quit_timers(before)
+        if self.cfg.quit_block == "until_change":
+            blocked = kn.quit_members != NEVER
+            kn.quit_members[blocked & (kn.member_counts() != kn.quit_members)] = NEVER
+        c = self.counters
+        c.rounds = self.round
+        c.messages += traffic.messages
+        c.informative_messages += traffic.informative
+        c.data_items += traffic.data_items
+        c.data_items_dense += traffic.data_items_dense
+        self.received += traffic.received
+        changed = not np.array_equal(kn.bids, self._last_bids) or kn.bundles != self._last_bundles
+        self._last_bids = kn.bids.copy()
+        self._last_bundles = [list(b) for b in kn.bundles]
+        self.stable_rounds = 0 if changed or self._quit_pending() else self.stable_rounds + 1
+        self.converged = self.stable_rounds >= self.graph.diameter + 1
+        self._touch()
+        return traffic
+
+    def _release_outbid(self) -> None:
+        """Release the first lost bundle task and everything after it (spec cbga §3.8)."""
+        kn = self.knowledge
+        own = kn.own_bids()
+        for i, bundle in enumerate(kn.bundles):
+            sequence = bundle if self.cfg.release_order == "bundle" else kn.paths[i]
+            lost = next((j for j in sequence if own[i, j] <= 0), None)
+            if lost is not None:
+                self.counters.released += len(kn.release(i, lost, self.cfg.release_order))
+                self._dirty.add(i)
+
+    def _reset_quit_timers(self, before: np.ndarray) -> None:
+        """H_i[j] = T when column j of an incomplete held group changed (Alg 9 lines 4–5, ``reset_on``)."""
+        kn = self.knowledge
+        if self.cfg.reset_on == "additions":
+            updated = ((kn.bids > 0) & ~(before > 0)).any(axis=1)
+        else:
+            updated = (kn.bids != before).any(axis=1)
+        held = kn.own_bids() > 0
+        incomplete = kn.member_counts() < self.scenario.task_agents[None, :]
+        reset = updated & held & incomplete & (self.scenario.task_agents > 1)[None, :] & ~kn.quit
+        kn.assigned_at[reset] = self.round
+
+    def _quit_pending(self) -> bool:
+        """A held incomplete group whose quit timer had not run out in the last bundle phase: a quit may follow."""
+        if not self.cfg.task_quitting:
+            return False
+        kn = self.knowledge
+        quittable = ((self.scenario.task_agents > 1)[None, :] & (kn.own_bids() > 0) & ~kn.quit
+                     & (kn.member_counts() < self.scenario.task_agents[None, :]))
+        return bool(np.any(quittable & (self.round - 1 - kn.assigned_at <= self.cfg.delta)))
+
+    # -- agreement -------------------------------------------------------------------------------------------------
+    def agreement(self) -> bool:
+        """Every pair of agents in one connected component holds the same table (spec cbga §8.3)."""
+        bids = self.knowledge.bids
+        comp = self.graph.component
+        return all(np.array_equal(bids[i], bids[comp[i]]) for i in range(len(comp)))

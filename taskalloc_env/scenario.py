@@ -1,0 +1,281 @@
+"""Agents and tasks of one problem instance, as arrays (spec cbga §1.1).
+
+A :class:`Scenario` is either generated from a :class:`~taskalloc_env.config.TaskAllocConfig` and a
+``numpy.random.Generator`` (``generate``; every seed a new instance, spec cbga §6.1), or built from explicit
+:class:`Agent` and :class:`Task` records (``Scenario.from_entities``). Agent and task ids are their indices.
+
+Equipment: every agent carries a set of equipment items (``ae_i``, a bit mask over the scenario's equipment
+names) and every task requires a multiset (``te_j``, a count per item); the empty multiset lets any agent bid
+(spec cbga §1.4).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import numpy as np
+
+from taskalloc_env.config import TaskAllocConfig, type_counts
+
+NO_DEADLINE = np.inf
+
+
+@dataclasses.dataclass(frozen=True)
+class Agent:
+    """One UAV: start position (3-D), constant speed, equipment set (spec cbga §1.1)."""
+
+    position: tuple[float, float, float]
+    speed: float
+    equipment: tuple[str, ...] = ()
+
+
+@dataclasses.dataclass(frozen=True)
+class Task:
+    """One task: position, reward c̄_j, start window [start, end], duration, L_j, te_j, P_j (spec cbga §1.1)."""
+
+    position: tuple[float, float, float]
+    reward: float
+    start: float
+    end: float
+    duration: float
+    agents: int = 1
+    equipment: tuple[str, ...] = ()
+    prerequisites: tuple[int, ...] = ()
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Scenario:
+    """Arrays of agent and task attributes. Shapes: N agents, M tasks, E equipment items."""
+
+    agent_pos: np.ndarray          # (N, 3)
+    agent_speed: np.ndarray        # (N,)
+    agent_equipment: np.ndarray    # (N, E) bool: ae_i
+    task_pos: np.ndarray           # (M, 3)
+    task_reward: np.ndarray        # (M,) c̄_j
+    task_start: np.ndarray         # (M,)
+    task_end: np.ndarray           # (M,) latest start (arrival must be strictly earlier, (3.7))
+    task_duration: np.ndarray      # (M,)
+    task_agents: np.ndarray        # (M,) int L_j
+    task_equipment: np.ndarray     # (M, E) int: te_j as counts per item
+    task_prereqs: np.ndarray       # (M, M) bool: task_prereqs[j, m] ⇔ m ∈ P_j
+    time_discount: float           # λ
+    distance_discount: float       # γ
+    equipment_names: tuple[str, ...] = ()
+    arena: tuple[float, float, float] = (5.0, 5.0, 2.0)
+
+    def __post_init__(self) -> None:
+        n, m = len(self.agent_pos), len(self.task_pos)
+        e = len(self.equipment_names)
+        checks = {
+            "agent_pos": (self.agent_pos.shape, (n, 3)),
+            "agent_speed": (self.agent_speed.shape, (n,)),
+            "agent_equipment": (self.agent_equipment.shape, (n, e)),
+            "task_reward": (self.task_reward.shape, (m,)),
+            "task_start": (self.task_start.shape, (m,)),
+            "task_end": (self.task_end.shape, (m,)),
+            "task_duration": (self.task_duration.shape, (m,)),
+            "task_agents": (self.task_agents.shape, (m,)),
+            "task_equipment": (self.task_equipment.shape, (m, e)),
+            "task_prereqs": (self.task_prereqs.shape, (m, m)),
+        }
+        for name, (got, want) in checks.items():
+            if got != want:
+                raise ValueError(f"scenario array {name} has shape {got}, expected {want}")
+        if n == 0 or m == 0:
+            raise ValueError(f"a scenario needs at least one agent and one task (got {n} agents, {m} tasks)")
+        if np.any(self.agent_speed <= 0):
+            raise ValueError(f"agent speeds must be > 0, got {self.agent_speed.tolist()}")
+        if np.any(self.task_agents < 1):
+            raise ValueError(f"every task needs L_j >= 1 agents, got {self.task_agents.tolist()}")
+        if np.any(self.task_end < self.task_start):
+            bad = np.flatnonzero(self.task_end < self.task_start).tolist()
+            raise ValueError(f"tasks {bad} have end < start")
+        positions = np.vstack([self.agent_pos, self.task_pos])
+        if np.any(np.abs(positions) > np.asarray(self.arena) * (1 + 1e-9)):
+            raise ValueError(f"positions must lie within ±arena {self.arena} on every axis")
+        if np.any(self.task_duration < 0) or np.any(self.task_reward < 0):
+            raise ValueError("task durations and rewards must be >= 0")
+        if np.any(self.task_equipment.sum(axis=1) > self.task_agents):
+            bad = np.flatnonzero(self.task_equipment.sum(axis=1) > self.task_agents).tolist()
+            raise ValueError(f"tasks {bad} require more equipment items than agents (|te_j| > L_j)")
+        if np.any(np.diag(self.task_prereqs)):
+            raise ValueError("a task cannot be its own prerequisite (j ∉ P_j, spec cbga §1.1)")
+        if _has_cycle(self.task_prereqs):
+            raise ValueError("prerequisites contain a cycle; no task of the cycle could ever be done")
+        for array in dataclasses.astuple(self):
+            if isinstance(array, np.ndarray):
+                array.setflags(write=False)
+
+    @property
+    def n_agents(self) -> int:
+        return len(self.agent_pos)
+
+    @property
+    def n_tasks(self) -> int:
+        return len(self.task_pos)
+
+    @property
+    def multi_agent(self) -> np.ndarray:
+        """Tasks with L_j > 1."""
+        return self.task_agents > 1
+
+    @property
+    def has_equipment(self) -> bool:
+        return bool(self.task_equipment.any())
+
+    @property
+    def has_prerequisites(self) -> bool:
+        return bool(self.task_prereqs.any())
+
+    def eligible(self) -> np.ndarray:
+        """(N, M) equipment eligibility: te_j = ∅ or ae_i ∩ te_j ≠ ∅ (spec cbga §1.4, §3.3 filter 1)."""
+        required = self.task_equipment > 0
+        shares = self.agent_equipment.astype(np.int64) @ required.T.astype(np.int64) > 0
+        return shares | ~required.any(axis=1)[None, :]
+
+    def infeasible_tasks(self) -> dict[int, str]:
+        """Tasks no team of this scenario can ever complete, with the reason (reported, not an error)."""
+        reasons: dict[int, str] = {}
+        eligible = self.eligible()
+        capable = eligible.sum(axis=0)
+        have = self.agent_equipment.sum(axis=0)
+        for j in range(self.n_tasks):
+            if capable[j] < self.task_agents[j]:
+                reasons[j] = (f"needs L_j = {self.task_agents[j]} agents but only {capable[j]} carry "
+                              "equipment it accepts")
+                continue
+            short = [self.equipment_names[e] for e in np.flatnonzero(self.task_equipment[j] > have)]
+            if short:
+                reasons[j] = f"needs more agents with {short} than the scenario has"
+        return reasons
+
+    def to_entities(self) -> tuple[list[Agent], list[Task]]:
+        """The explicit records this scenario was (or could have been) built from."""
+        names = self.equipment_names
+        agents = [Agent(tuple(map(float, self.agent_pos[i])), float(self.agent_speed[i]),
+                        tuple(names[e] for e in np.flatnonzero(self.agent_equipment[i])))
+                  for i in range(self.n_agents)]
+        tasks = [Task(tuple(map(float, self.task_pos[j])), float(self.task_reward[j]), float(self.task_start[j]),
+                      float(self.task_end[j]), float(self.task_duration[j]), int(self.task_agents[j]),
+                      tuple(n for e, n in enumerate(names) for _ in range(int(self.task_equipment[j, e]))),
+                      tuple(int(m) for m in np.flatnonzero(self.task_prereqs[j])))
+                 for j in range(self.n_tasks)]
+        return agents, tasks
+
+    @classmethod
+    def from_entities(cls, agents: Sequence[Agent], tasks: Sequence[Task], *, time_discount: float = 0.8,
+                      distance_discount: float = 0.8, arena: tuple[float, float, float] | None = None,
+                      equipment_names: Sequence[str] | None = None) -> Scenario:
+        """Build a fixed scenario from explicit agents and tasks (ids are list positions)."""
+        if equipment_names is None:
+            seen: list[str] = []
+            for item in [e for a in agents for e in a.equipment] + [e for t in tasks for e in t.equipment]:
+                if item not in seen:
+                    seen.append(item)
+            equipment_names = seen
+        names = tuple(equipment_names)
+        index = {name: e for e, name in enumerate(names)}
+        for record in [*agents, *tasks]:
+            unknown = [e for e in record.equipment if e not in index]
+            if unknown:
+                raise ValueError(f"equipment {unknown} of {record} is not in equipment_names {list(names)}")
+        m = len(tasks)
+        prereqs = np.zeros((m, m), dtype=bool)
+        for j, task in enumerate(tasks):
+            for p in task.prerequisites:
+                if not 0 <= p < m:
+                    raise ValueError(f"task {j} names prerequisite {p}, but task ids run 0..{m - 1}")
+                prereqs[j, p] = True
+        agent_eq = np.zeros((len(agents), len(names)), dtype=bool)
+        for i, agent in enumerate(agents):
+            agent_eq[i, [index[e] for e in agent.equipment]] = True
+        task_eq = np.zeros((m, len(names)), dtype=np.int64)
+        for j, task in enumerate(tasks):
+            for e in task.equipment:
+                task_eq[j, index[e]] += 1
+        positions = np.array([a.position for a in agents] + [t.position for t in tasks], dtype=float).reshape(-1, 3)
+        if arena is None:  # every |coordinate| / arena ≤ 1, which the observation bounds rely on
+            arena = tuple(float(v) for v in np.maximum(np.abs(positions).max(axis=0), 1e-9))
+        return cls(
+            agent_pos=np.array([a.position for a in agents], dtype=float).reshape(-1, 3),
+            agent_speed=np.array([a.speed for a in agents], dtype=float),
+            agent_equipment=agent_eq,
+            task_pos=np.array([t.position for t in tasks], dtype=float).reshape(-1, 3),
+            task_reward=np.array([t.reward for t in tasks], dtype=float),
+            task_start=np.array([t.start for t in tasks], dtype=float),
+            task_end=np.array([t.end for t in tasks], dtype=float),
+            task_duration=np.array([t.duration for t in tasks], dtype=float),
+            task_agents=np.array([t.agents for t in tasks], dtype=np.int64),
+            task_equipment=task_eq,
+            task_prereqs=prereqs,
+            time_discount=float(time_discount),
+            distance_discount=float(distance_discount),
+            equipment_names=names,
+            arena=tuple(arena),
+        )
+
+
+def _has_cycle(prereqs: np.ndarray) -> bool:
+    """Whether the prerequisite graph has a cycle (Kahn's algorithm)."""
+    indegree = prereqs.sum(axis=1).astype(int)
+    ready = list(np.flatnonzero(indegree == 0))
+    seen = 0
+    while ready:
+        m = ready.pop()
+        seen += 1
+        for j in np.flatnonzero(prereqs[:, m]):
+            indegree[j] -= 1
+            if indegree[j] == 0:
+                ready.append(j)
+    return seen < len(prereqs)
+
+
+def generate(cfg: TaskAllocConfig, rng: np.random.Generator) -> Scenario:
+    """Draw a random instance of ``cfg`` (spec cbga §6.1).
+
+    Agents start uniformly on the floor (z = 0), tasks uniformly in the W × W × H volume, start times
+    U(start_time_range) (``start_time_dist`` [REF]), end = start + window, duration fixed. L_j is ``agents_per_task``
+    (one value, or drawn uniformly from a list), or comes from ``task_mix``. Prerequisite chains follow E3.15.
+    """
+    n, m = cfg.n_agents, cfg.n_tasks
+    width, depth, height = cfg.arena
+    agent_pos = np.column_stack([rng.uniform(0, width, n), rng.uniform(0, depth, n), np.zeros(n)])
+    task_pos = rng.uniform((0, 0, 0), (width, depth, height), size=(m, 3))
+    start = rng.uniform(*cfg.start_time_range, size=m)
+    end = start + cfg.window
+    names = cfg.equipment_names
+    agent_eq = np.zeros((n, len(names)), dtype=bool)
+    if cfg.agent_types:
+        types = np.repeat(np.arange(len(cfg.agent_types)), type_counts(cfg))
+        agent_eq[np.arange(n), types] = True
+    task_eq = np.zeros((m, len(names)), dtype=np.int64)
+    if cfg.task_mix:
+        agents = np.empty(m, dtype=np.int64)
+        j = 0
+        for mix in cfg.task_mix:
+            for _ in range(mix.count):
+                agents[j] = mix.required_agents
+                for item in mix.equipment:
+                    task_eq[j, names.index(item)] += 1
+                j += 1
+    elif isinstance(cfg.agents_per_task, tuple):
+        agents = rng.choice(np.array(cfg.agents_per_task, dtype=np.int64), size=m)
+    else:
+        agents = np.full(m, cfg.agents_per_task, dtype=np.int64)
+    prereqs = np.zeros((m, m), dtype=bool)
+    if cfg.prerequisites:
+        chains = cfg.prerequisites
+        order = rng.permutation(m)[: chains.chains * chains.length].reshape(chains.chains, chains.length)
+        for chain in order:
+            for earlier, later in zip(chain[:-1], chain[1:]):
+                prereqs[later, earlier] = True
+                if not chains.followup_window:
+                    end[later] = NO_DEADLINE
+    speed = np.full(n, cfg.speed_internal)
+    return Scenario(
+        agent_pos=agent_pos, agent_speed=speed, agent_equipment=agent_eq, task_pos=task_pos,
+        task_reward=np.full(m, cfg.reward), task_start=start, task_end=end, task_duration=np.full(m, cfg.duration),
+        task_agents=agents, task_equipment=task_eq, task_prereqs=prereqs, time_discount=cfg.time_discount,
+        distance_discount=cfg.distance_discount, equipment_names=names, arena=cfg.arena,
+    )
