@@ -50,8 +50,9 @@ class BidView:
         return self.group_total - self.displaced_bid + self.gain
 
 
-def prerequisites_met(knowledge: LocalKnowledge, scenario: Scenario, counts: np.ndarray, mode: str) -> np.ndarray:
-    """(N, M) prerequisite filter per ``prereq_mode`` (spec cbga §1.5), evaluated on each agent's own table."""
+def prerequisites_met(bids: np.ndarray, scenario: Scenario, mode: str) -> np.ndarray:
+    """(H, M) prerequisite filter per ``prereq_mode`` (spec cbga §1.5) on H bid tables ``bids`` (H, N, M)."""
+    counts = (bids > 0).sum(axis=1)
     prereqs = scenario.task_prereqs
     if not prereqs.any():
         return np.ones(counts.shape, dtype=bool)
@@ -59,18 +60,18 @@ def prerequisites_met(knowledge: LocalKnowledge, scenario: Scenario, counts: np.
     if mode == "all_have_bid":
         return (counts == 0).astype(np.int64) @ lacking == 0
     if mode == "all_complete":
-        complete = complete_groups(knowledge, scenario, counts)
+        complete = complete_groups(bids, scenario)
         return (~complete).astype(np.int64) @ lacking == 0
     has_prereqs = prereqs.any(axis=1)[None, :]
     return ((counts > 0).astype(np.int64) @ lacking > 0) | ~has_prereqs
 
 
-def complete_groups(knowledge: LocalKnowledge, scenario: Scenario, counts: np.ndarray) -> np.ndarray:
-    """(N, M) column j of i's table has L_j members whose equipment covers te_j."""
-    full = counts == scenario.task_agents[None, :]
+def complete_groups(bids: np.ndarray, scenario: Scenario) -> np.ndarray:
+    """(H, M) column j of table h has L_j members whose equipment covers te_j."""
+    full = (bids > 0).sum(axis=1) == scenario.task_agents[None, :]
     if not scenario.has_equipment:
         return full
-    have = np.einsum("ikm,ke->ime", (knowledge.bids > 0).astype(np.int64),
+    have = np.einsum("ikm,ke->ime", (bids > 0).astype(np.int64),
                      scenario.agent_equipment.astype(np.int64))
     return full & np.all(have >= scenario.task_equipment[None, :, :], axis=2)
 
@@ -121,7 +122,7 @@ def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment
         displaced[:, multi] = np.where(~room & beats, lowest, NONE)
         displaced_bid[:, multi] = np.where(~room & beats, low_bid, 0.0)
 
-    prereqs_met = prerequisites_met(knowledge, scenario, counts, prereq_mode)
+    prereqs_met = prerequisites_met(bids, scenario, prereq_mode)
     eligible = equipment_match & prereqs_met & ~in_bundle
     if require_known_capacity:
         eligible &= known_capacity(knowledge, scenario, equipment_match)

@@ -194,10 +194,10 @@ def _validate(cfg: TaskAllocConfig) -> None:
         if not isinstance(getattr(cfg, name), bool):
             _fail(name, getattr(cfg, name), "true | false")
     _check_positive_int("delta", cfg.delta, minimum=0)
-    if cfg.agent_types is not None:
-        if not cfg.agent_types or len(set(cfg.agent_types)) != len(cfg.agent_types) \
-                or not all(isinstance(t, str) and t for t in cfg.agent_types):
-            _fail("agent_types", cfg.agent_types, "null or a list of distinct type names")
+    if cfg.agent_types is not None and (
+            not cfg.agent_types or len(set(cfg.agent_types)) != len(cfg.agent_types)
+            or not all(isinstance(t, str) and t for t in cfg.agent_types)):
+        _fail("agent_types", cfg.agent_types, "null or a list of distinct type names")
     if cfg.agent_type_counts is not None:
         if cfg.agent_types is None or len(cfg.agent_type_counts) != len(cfg.agent_types):
             _fail("agent_type_counts", cfg.agent_type_counts, "one count per entry of agent_types")
@@ -259,8 +259,7 @@ def _normalise(name: str, value: Any) -> Any:
                 _fail(f"task_mix.{sorted(unknown)[0]}", entry, "keys count, agents, equipment")
             if "count" not in entry:
                 _fail("task_mix.count", entry, "every task_mix entry needs a count")
-            equipment = entry.get("equipment", ())
-            equipment = tuple(equipment) if not isinstance(equipment, str) else tuple(equipment)
+            equipment = tuple(entry.get("equipment", ()))  # "AB" and ["A", "B"] both name two items
             mixes.append(TaskMix(count=entry["count"], agents=entry.get("agents"), equipment=equipment))
         return tuple(mixes)
     if name == "prerequisites" and value is not None:

@@ -12,6 +12,7 @@ names) and every task requires a multiset (``te_j``, a count per item); the empt
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from collections.abc import Sequence
 
 import numpy as np
@@ -268,7 +269,7 @@ def generate(cfg: TaskAllocConfig, rng: np.random.Generator) -> Scenario:
         chains = cfg.prerequisites
         order = rng.permutation(m)[: chains.chains * chains.length].reshape(chains.chains, chains.length)
         for chain in order:
-            for earlier, later in zip(chain[:-1], chain[1:]):
+            for earlier, later in itertools.pairwise(chain):
                 prereqs[later, earlier] = True
                 if not chains.followup_window:
                     end[later] = NO_DEADLINE

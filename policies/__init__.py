@@ -1,0 +1,23 @@
+"""Policies for the taskalloc environment: scripted consensus baselines, random, learned; centralised solvers."""
+
+from __future__ import annotations
+
+from policies.base import Policy
+from policies.exact import exact
+from policies.registry import POLICY_NAMES, make_policy
+from policies.rollout import rollout
+from policies.scripted import CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
+from policies.sgama import sgama
+
+__all__ = [
+    "POLICY_NAMES",
+    "CBBAPolicy",
+    "CBGAPolicy",
+    "PassPolicy",
+    "Policy",
+    "RandomPolicy",
+    "exact",
+    "make_policy",
+    "rollout",
+    "sgama",
+]

@@ -1,0 +1,118 @@
+"""Scripted baselines that read only the observation: CBBA, CBGA and its variants, random, always-pass.
+
+Bundle construction (spec cbga §3.3–3.6, Alg 5): among the valid bids (the action mask: eligibility filters and
+the outbid test h_ij), pick the largest marginal gain c_ij, one bid per step; pass when nothing is valid. Ties go to
+the lower task id (spec cbga §3.5 [INF]). The environment stores the bid, inserts the task at the agent's best slot
+and runs the consensus.
+
+* ``team_bidding`` (spec cbga §5.2, Alg 8 / (5.5)): the final choice maximises the group total after the bid,
+  ``team_value = net`` (default: Σ_k X_i[k][j] − displaced bid + c_ij) or ``literal`` ((5.5) as printed, without
+  subtracting the displaced bid). Bid values and validity are unchanged.
+* ``task_quitting`` (spec cbga §5.3, Alg 9): before bidding, quit a multi-agent task whose group is still
+  incomplete once the group-synchronised timer passed δ = ``quit_threshold`` rounds, once per task. The
+  environment keeps the timer and allows the quit only when Alg 9's conditions hold, so the policy needs an
+  environment with ``task_quitting=True, delta=quit_threshold`` (``env_overrides``). Quits go in task-id order,
+  one per step, as Alg 9 loops over tasks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from policies.base import Policy
+
+TEAM_VALUES = ("net", "literal")
+
+
+class CBGAPolicy(Policy):
+    """CBGA (Hunt 2014), with team-improving bids and task quitting as options; both on = CBGABI."""
+
+    def __init__(self, team_bidding: bool = False, task_quitting: bool = False, quit_threshold: int = 1,
+                 team_value: str = "net") -> None:
+        super().__init__()
+        if team_value not in TEAM_VALUES:
+            raise ValueError(f"team_value {team_value!r} is not one of {TEAM_VALUES}")
+        if isinstance(quit_threshold, bool) or not isinstance(quit_threshold, int) or quit_threshold < 0:
+            raise ValueError(f"quit_threshold must be an integer >= 0, got {quit_threshold!r}")
+        self.team_bidding = team_bidding
+        self.task_quitting = task_quitting
+        self.quit_threshold = quit_threshold
+        self.team_value = team_value
+        suffix = {(False, False): "", (False, True): "+TQ", (True, False): "+TB", (True, True): "BI"}
+        self.name = "CBGA" + suffix[(team_bidding, task_quitting)]
+
+    @property
+    def env_overrides(self) -> dict[str, Any]:
+        if self.task_quitting:
+            return {"task_quitting": True, "delta": self.quit_threshold}
+        return {}
+
+    def act(self, observations: Mapping[str, Mapping[str, np.ndarray]],
+            infos: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, int]:
+        m = self.n_tasks
+        layout = self.layout
+        actions = {}
+        for agent, obs in observations.items():
+            mask = np.asarray(obs["action_mask"], dtype=bool)
+            features = obs["observation"]
+            if self.task_quitting:
+                quits = np.flatnonzero(mask[m + 1:])
+                if quits.size:
+                    actions[agent] = m + 1 + int(quits[0])
+                    continue
+            valid = mask[1: m + 1]
+            if not valid.any():
+                actions[agent] = 0
+                continue
+            value = layout.task_feature(features, "gain")
+            if self.team_bidding:
+                value = value + layout.task_feature(features, "group_total")
+                if self.team_value == "net":
+                    value = value - layout.task_feature(features, "displaced_bid")
+            actions[agent] = 1 + int(np.argmax(np.where(valid, value, -np.inf)))   # first max: lowest task id
+        return actions
+
+
+class CBBAPolicy(CBGAPolicy):
+    """CBBA (Choi et al. 2009) on single-agent tasks: the same greedy rule, consensus by the CBBA table."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.name = "CBBA"
+
+    def start(self, env: Any, seed: int | None = None) -> None:
+        super().start(env, seed)
+        if self.env.config.task_mix is not None or (self.env.scenario.task_agents > 1).any():
+            raise ValueError("CBBA assigns single-agent tasks only (every L_j = 1); use CBGAPolicy for L_j > 1")
+
+
+class RandomPolicy(Policy):
+    """Uniform over each agent's action mask; reseeded by ``start(env, seed)`` when a seed is given."""
+
+    name = "random"
+
+    def __init__(self, seed: int | None = None) -> None:
+        super().__init__()
+        self.rng = np.random.default_rng(seed)
+
+    def start(self, env: Any, seed: int | None = None) -> None:
+        super().start(env, seed)
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+
+    def act(self, observations: Mapping[str, Mapping[str, np.ndarray]],
+            infos: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, int]:
+        return {agent: int(self.rng.choice(np.flatnonzero(obs["action_mask"]))) for agent, obs in observations.items()}
+
+
+class PassPolicy(Policy):
+    """Every agent passes: the empty allocation (score 0), a floor for comparisons and a test driver."""
+
+    name = "pass"
+
+    def act(self, observations: Mapping[str, Mapping[str, np.ndarray]],
+            infos: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, int]:
+        return dict.fromkeys(observations, 0)
