@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from taskalloc_env.allocation import Allocation
-from taskalloc_env.bidding import prerequisites_met
+from taskalloc_env.bidding import complete_groups, prerequisites_met
 from taskalloc_env.config import TaskAllocConfig
 from taskalloc_env.group_merge import Equipment
 from taskalloc_env.scenario import Scenario
@@ -33,10 +33,8 @@ def sgama(scenario: Scenario, cfg: TaskAllocConfig | None = None) -> Allocation:
     match = scenario.eligible()
     paths: list[list[int]] = [[] for _ in range(n)]
     x = np.zeros((n, m))                        # x_ij: the bid agent i placed on task j
-    gains = np.zeros((n, m))
-    slots = np.zeros((n, m), dtype=np.int64)
-    for i in range(n):
-        gains[i], slots[i] = model.insertion_gains(i, paths[i])
+    plan = model.plan(range(n), paths)
+    gains, slots = plan.gain, plan.slot
     cap = cfg.max_bundle or m
     iterations = 0
     while True:
@@ -44,7 +42,8 @@ def sgama(scenario: Scenario, cfg: TaskAllocConfig | None = None) -> Allocation:
         room = members.sum(axis=0) < scenario.task_agents
         open_slot = equipment.slot_open(np.broadcast_to(members, (n, n, m)),
                                         np.broadcast_to(np.arange(n)[:, None], (n, m)))
-        prereqs = prerequisites_met(x[None, :, :], scenario, cfg.prereq_mode)[0]
+        complete = complete_groups(x[None], scenario) if cfg.prereq_mode == "all_complete" else None
+        prereqs = prerequisites_met(scenario, cfg.prereq_mode, members.sum(axis=0)[None], complete)[0]
         sizes = np.array([len(p) for p in paths])
         ok = (match & (gains > 0) & ~members & room[None, :] & open_slot & prereqs[None, :]
               & (sizes < cap)[:, None])

@@ -50,9 +50,12 @@ class BidView:
         return self.group_total - self.displaced_bid + self.gain
 
 
-def prerequisites_met(bids: np.ndarray, scenario: Scenario, mode: str) -> np.ndarray:
-    """(H, M) prerequisite filter per ``prereq_mode`` (spec cbga §1.5) on H bid tables ``bids`` (H, N, M)."""
-    counts = (bids > 0).sum(axis=1)
+def prerequisites_met(scenario: Scenario, mode: str, counts: np.ndarray,
+                      complete: np.ndarray | None = None) -> np.ndarray:
+    """(H, M) prerequisite filter per ``prereq_mode`` (spec cbga §1.5) from H tables' member counts (H, M).
+
+    ``complete`` (H, M), the groups that are full with their equipment covered, is needed for ``all_complete``.
+    """
     prereqs = scenario.task_prereqs
     if not prereqs.any():
         return np.ones(counts.shape, dtype=bool)
@@ -60,7 +63,8 @@ def prerequisites_met(bids: np.ndarray, scenario: Scenario, mode: str) -> np.nda
     if mode == "all_have_bid":
         return (counts == 0).astype(np.int64) @ lacking == 0
     if mode == "all_complete":
-        complete = complete_groups(bids, scenario)
+        if complete is None:
+            raise ValueError("prereq_mode all_complete needs the complete groups")
         return (~complete).astype(np.int64) @ lacking == 0
     has_prereqs = prereqs.any(axis=1)[None, :]
     return ((counts > 0).astype(np.int64) @ lacking > 0) | ~has_prereqs
@@ -92,37 +96,44 @@ def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment
     n, m = gain.shape
     agents = np.arange(n)
     bids = knowledge.bids
-    present = bids > 0
-    counts = present.sum(axis=1)
-    group_total = bids.sum(axis=1)
-    lowest_bid = np.where(counts > 0, np.where(present, bids, np.inf).min(axis=1), 0.0)
+    counts = np.zeros((n, m), dtype=np.int64)
+    group_total = np.zeros((n, m))
+    lowest_bid = np.zeros((n, m))
     in_bundle = knowledge.own_bids() > 0
     outbid = np.zeros((n, m), dtype=bool)
     displaced = np.full((n, m), NONE, dtype=np.int64)
     displaced_bid = np.zeros((n, m))
 
     single = knowledge.single
-    if single.any():
+    if single.any():            # one winner per column: read the cache instead of the (N, N, M) tensor
         winner = knowledge.winner[:, single]
         held = knowledge.winning_bid()[:, single]
+        counts[:, single] = winner != NONE
+        group_total[:, single] = held
+        lowest_bid[:, single] = held
         outbid[:, single] = (winner == NONE) | outbids(gain[:, single], agents[:, None], held, winner)
         displaced[:, single] = winner
         displaced_bid[:, single] = held
     multi = ~single
     if multi.any():
-        members = present[:, :, multi]
+        columns = bids[:, :, multi]
+        members = columns > 0
+        counts[:, multi] = members.sum(axis=1)
+        group_total[:, multi] = columns.sum(axis=1)
+        lowest_bid[:, multi] = np.where(counts[:, multi] > 0, np.where(members, columns, np.inf).min(axis=1), 0.0)
         newcomer = np.broadcast_to(agents[:, None], (n, int(multi.sum())))
         eq = equipment.subset(multi)
         room = (counts[:, multi] < scenario.task_agents[None, multi]) & eq.slot_open(members, newcomer)
         victims = eq.replaceable(members, newcomer)
-        lowest = np.argmin(np.where(victims, bids[:, :, multi], np.inf), axis=1)
-        low_bid = np.take_along_axis(bids[:, :, multi], lowest[:, None, :], axis=1)[:, 0, :]
+        lowest = np.argmin(np.where(victims, columns, np.inf), axis=1)
+        low_bid = np.take_along_axis(columns, lowest[:, None, :], axis=1)[:, 0, :]
         beats = victims.any(axis=1) & outbids(gain[:, multi], agents[:, None], low_bid, lowest)
         outbid[:, multi] = room | beats
         displaced[:, multi] = np.where(~room & beats, lowest, NONE)
         displaced_bid[:, multi] = np.where(~room & beats, low_bid, 0.0)
 
-    prereqs_met = prerequisites_met(bids, scenario, prereq_mode)
+    complete = complete_groups(bids, scenario) if prereq_mode == "all_complete" else None
+    prereqs_met = prerequisites_met(scenario, prereq_mode, counts, complete)
     eligible = equipment_match & prereqs_met & ~in_bundle
     if require_known_capacity:
         eligible &= known_capacity(knowledge, scenario, equipment_match)

@@ -34,12 +34,21 @@ def decide(receiver: np.ndarray, sender: np.ndarray, z_i: np.ndarray, y_i: np.nd
     i = np.asarray(receiver)[..., None] if np.ndim(receiver) == np.ndim(z_i) - 1 else np.asarray(receiver)
     k = np.asarray(sender)[..., None] if np.ndim(sender) == np.ndim(z_k) - 1 else np.asarray(sender)
 
-    def stamp(s: np.ndarray, z: np.ndarray) -> np.ndarray:
-        return np.take_along_axis(s, np.where(z == NONE, 0, z), axis=-1)
+    z_i_at = np.where(z_i == NONE, 0, z_i)
+    z_k_at = np.where(z_k == NONE, 0, z_k)
+    if np.ndim(s_i) == 2 and np.ndim(z_i) == 2:       # (R, N) stamps, (R, M) beliefs: index rows directly
+        rows = np.arange(len(s_i))[:, None]
 
-    fresh_zk = stamp(s_k, z_k) > stamp(s_i, z_k)     # sender heard from its winner m more recently
-    stale_zk = stamp(s_i, z_k) > stamp(s_k, z_k)     # receiver heard from m more recently
-    fresh_zi = stamp(s_k, z_i) > stamp(s_i, z_i)     # sender heard from the receiver's winner more recently
+        def stamp(s: np.ndarray, z: np.ndarray) -> np.ndarray:
+            return s[rows, z]
+    else:
+        def stamp(s: np.ndarray, z: np.ndarray) -> np.ndarray:
+            return np.take_along_axis(s, z, axis=-1)
+
+    sk_zk, si_zk = stamp(s_k, z_k_at), stamp(s_i, z_k_at)
+    fresh_zk = sk_zk > si_zk                          # sender heard from its winner m more recently
+    stale_zk = si_zk > sk_zk                          # receiver heard from m more recently
+    fresh_zi = stamp(s_k, z_i_at) > stamp(s_i, z_i_at)  # sender heard from the receiver's winner more recently
     better = outbids(y_k, z_k, y_i, z_i)
 
     snd_k, snd_i, snd_none = z_k == k, z_k == i, z_k == NONE

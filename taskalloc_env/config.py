@@ -334,7 +334,8 @@ def load_config(name: str | Path = "default", **overrides: Any) -> TaskAllocConf
     with open(path) as fh:
         data = yaml.safe_load(fh) or {}
     if not isinstance(data, Mapping):
-        raise ConfigError(f"scenario file {str(path)!r} must hold a mapping of config fields, got {type(data).__name__}")
+        raise ConfigError(f"scenario file {str(path)!r} must hold a mapping of config fields, "
+                          f"got {type(data).__name__}")
     return from_mapping({**data, **overrides})
 
 

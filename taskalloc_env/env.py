@@ -40,7 +40,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from gymnasium import spaces
@@ -65,8 +65,8 @@ class InvalidActionError(ValueError):
 class TaskAllocEnv(ParallelEnv):
     """The parallel environment; see the module docstring for the card."""
 
-    metadata = {"name": "taskalloc_v0", "render_modes": ["ansi", "rgb_array", "human"], "is_parallelizable": True,
-                "render_fps": 2}
+    metadata: ClassVar[dict[str, Any]] = {"name": "taskalloc_v0", "render_modes": ["ansi", "rgb_array", "human"],
+                                          "is_parallelizable": True, "render_fps": 2}
 
     def __init__(self, scenario: str | Path | TaskAllocConfig | Mapping[str, Any] | Scenario = "default",
                  max_cycles: int | None = None, render_mode: str | None = None, invalid_action: str = "raise",
@@ -135,7 +135,8 @@ class TaskAllocEnv(ParallelEnv):
 
     def _check_agent_name(self, agent: str) -> None:
         if agent not in self.agent_index:
-            raise KeyError(f"unknown agent {agent!r}; agents are {self.possible_agents[0]} … {self.possible_agents[-1]}")
+            raise KeyError(f"unknown agent {agent!r}; agents are "
+                           f"{self.possible_agents[0]} … {self.possible_agents[-1]}")
 
     # -- episode -------------------------------------------------------------------------------------------------
     @property

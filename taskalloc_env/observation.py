@@ -157,7 +157,7 @@ class ObservationBuilder:
         return np.concatenate([own, f.reshape(s.n_agents, -1)], axis=1)
 
     def action_masks(self, protocol: Protocol, passed: np.ndarray) -> np.ndarray:
-        """(N, 1 + 2M) int8: pass always; bids on valid tasks; quits the protocol allows. Passed agents may only pass."""
+        """(N, 1 + 2M) int8: pass always, valid bids, allowed quits; a passed agent may only pass (sync rounds)."""
         view = protocol.view()
         n, m = view.gain.shape
         mask = np.zeros((n, 1 + 2 * m), dtype=np.int8)

@@ -25,7 +25,7 @@ from taskalloc_env.group_merge import Equipment
 from taskalloc_env.knowledge import NEVER, LocalKnowledge
 from taskalloc_env.network import CommGraph
 from taskalloc_env.scenario import Scenario
-from taskalloc_env.scoring import Schedule, ScoringModel, TeamScore, team_score
+from taskalloc_env.scoring import PathTable, Schedule, ScoringModel, TeamScore, team_score
 
 
 class ProtocolError(ValueError):
@@ -71,7 +71,7 @@ class Protocol:
         self.received = np.zeros(s.n_agents, dtype=np.int64)
         self.stable_rounds = 0
         self.converged = False
-        self._schedules: list[Schedule] = [self.model.schedule(i, []) for i in range(s.n_agents)]
+        self._paths = PathTable.empty(s.n_agents, s.n_tasks)
         self._gain = np.zeros((s.n_agents, s.n_tasks))
         self._slot = np.full((s.n_agents, s.n_tasks), -1, dtype=np.int64)
         self._dirty = set(range(s.n_agents))
@@ -88,15 +88,21 @@ class Protocol:
         self._score = None
 
     def _refresh_paths(self) -> None:
-        for i in sorted(self._dirty):
-            self._schedules[i] = self.model.schedule(i, self.knowledge.paths[i])
-            self._gain[i], self._slot[i] = self.model.insertion_gains(i, self.knowledge.paths[i], self._schedules[i])
+        """Re-time the changed paths and recompute their agents' marginal gains, in one batched call."""
+        if not self._dirty:
+            return
+        agents = sorted(self._dirty)
+        plan = self.model.plan(agents, [self.knowledge.paths[i] for i in agents])
+        self._paths.set_rows(agents, plan.timing)
+        self._gain[agents] = plan.gain
+        self._slot[agents] = plan.slot
         self._dirty.clear()
 
     @property
     def schedules(self) -> list[Schedule]:
+        """Every agent's path timing (computed on demand: the hot path keeps arrays only)."""
         self._refresh_paths()
-        return self._schedules
+        return self.model.plan(range(self.scenario.n_agents), self.knowledge.paths, gains=False).schedules
 
     def view(self) -> BidView:
         """The bidding situation of every agent (cached until the next change)."""
@@ -111,7 +117,8 @@ class Protocol:
     def score(self) -> TeamScore:
         """The team score of the allocation as it stands: each agent's own path (spec cbga §1.7)."""
         if self._score is None:
-            self._score = team_score(self.model, self.schedules, self.cfg.conflict_policy)
+            self._refresh_paths()
+            self._score = team_score(self.model, self._paths, self.cfg.conflict_policy)
         return self._score
 
     # -- Phase 1 decisions ---------------------------------------------------------------------------------------

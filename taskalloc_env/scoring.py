@@ -75,88 +75,155 @@ class ScoringModel:
         done = base + s.task_duration
         return np.where(s.task_prereqs, done[None, :], -np.inf).max(axis=1)
 
-    # -- one path --------------------------------------------------------------------------------------------
+    # -- paths and marginal gains, batched over agents ---------------------------------------------------------
     def schedule(self, agent: int, path: Sequence[int]) -> Schedule:
         """Replay (3.8)–(3.10) along ``path``; ``feasible`` is False if any arrival misses its window."""
-        path = tuple(int(j) for j in path)
-        k = len(path)
-        arrival, start, finish, reward, cost = (np.zeros(k) for _ in range(5))
-        speed = self.scenario.agent_speed[agent]
-        t, prev, feasible = 0.0, None, True
-        for r, j in enumerate(path):
-            leg = self.dist_agent_task[agent, j] if prev is None else self.dist_task_task[prev, j]
-            arrival[r] = t + leg / speed
-            feasible &= bool(arrival[r] < self.deadline[j]) and bool(self.doable[j])
-            start[r] = max(arrival[r], self.earliest[j])
-            finish[r] = t = start[r] + self.scenario.task_duration[j]
-            reward[r] = self.pay[j] * np.exp(-self.lam * (start[r] - self.scenario.task_start[j]))
-            d = leg if self.distance_cost == "leg" else self.dist_agent_task[agent, j]
-            cost[r] = self.gamma * d
-            prev = j
-        return Schedule(path, arrival, start, finish, reward, cost, feasible)
+        return self.plan([agent], [path], gains=False).timing.schedule(0)
 
-    # -- marginal gains (3.11) ---------------------------------------------------------------------------------
-    def insertion_gains(self, agent: int, path: Sequence[int],
-                        schedule: Schedule | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """c_ij and the best slot n_ij for every task j at once (3.11); 0 and −1 where no insertion is feasible.
+    def insertion_gains(self, agent: int, path: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+        """c_ij and the best slot n_ij of one agent for every task (see ``plan``)."""
+        plan = self.plan([agent], [path])
+        return plan.gain[0], plan.slot[0]
 
-        Inserting j at slot n delays the later tasks: with D the arrival delay at p_n and w_r = st_r − arr_r the
-        waiting time of task r, the start delay at r ≥ n is max(0, D − Σ_{q=n..r} w_q), so every (slot, task,
-        later task) triple is one array element and no Python loop runs over the path.
+    def plan(self, agents: Sequence[int], paths: Sequence[Sequence[int]], gains: bool = True) -> Plan:
+        """Schedules of ``paths`` and, with ``gains``, c_ij and n_ij (3.11) of every (agent, task), in one pass.
+
+        Paths are padded to a common length P. Timing runs one vectorised step per path position. Gains need no
+        loop: inserting j at slot n delays the later tasks; with D the arrival delay at p_n and w_r = st_r − arr_r
+        the waiting time at task r, the start delay at r ≥ n is max(0, D − Σ_{q=n..r} w_q). Only the (agent, slot,
+        task) triples that are feasible and could still pay (own reward > travel cost) get that suffix evaluated.
         """
-        sched = schedule if schedule is not None else self.schedule(agent, path)
-        path_arr = np.asarray(sched.path, dtype=np.int64)
-        k = len(path_arr)
         s = self.scenario
-        speed = s.agent_speed[agent]
-        free = np.concatenate(([0.0], sched.finish))                                 # (k+1,) departure times
-        to_task = np.vstack([self.dist_agent_task[agent][None, :], self.dist_task_task[path_arr]])  # (k+1, M)
-        arrive = free[:, None] + to_task / speed
-        start = np.maximum(arrive, self.earliest[None, :])
-        feasible = (arrive < self.deadline[None, :]) & self.doable[None, :]
-        gain = self.pay[None, :] * np.exp(-self.lam * (start - s.task_start[None, :]))
+        agents = np.asarray(agents, dtype=np.int64)
+        count = len(agents)
+        lengths = np.array([len(p) for p in paths], dtype=np.int64)
+        width = int(lengths.max(initial=0))
+        padded = np.zeros((count, width), dtype=np.int64)
+        present = np.arange(width)[None, :] < lengths[:, None]
+        for a, path in enumerate(paths):
+            padded[a, : lengths[a]] = path
+        speed = s.agent_speed[agents]
+        from_start = self.dist_agent_task[agents]                                        # (A, M)
+        # timing (3.8)-(3.10), position by position
+        leg = np.zeros((count, width))
+        arrival, start, finish, reward, cost = (np.zeros((count, width)) for _ in range(5))
+        feasible = np.ones(count, dtype=bool)
+        t = np.zeros(count)
+        rows = np.arange(count)
+        for r in range(width):
+            j = padded[:, r]
+            leg[:, r] = from_start[rows, j] if r == 0 else self.dist_task_task[padded[:, r - 1], j]
+            arrival[:, r] = t + leg[:, r] / speed
+            start[:, r] = np.maximum(arrival[:, r], self.earliest[j])
+            finish[:, r] = start[:, r] + s.task_duration[j]
+            reward[:, r] = self.pay[j] * np.exp(-self.lam * (start[:, r] - s.task_start[j]))
+            cost[:, r] = self.gamma * (leg[:, r] if self.distance_cost == "leg" else from_start[rows, j])
+            ok = (arrival[:, r] < self.deadline[j]) & self.doable[j]
+            feasible &= ok | ~present[:, r]
+            t = np.where(present[:, r], finish[:, r], t)
+        timing = Timing(padded, lengths, arrival, start, finish, np.where(present, reward, 0.0),
+                        np.where(present, cost, 0.0), feasible)
+        if not gains:
+            return Plan(timing, np.zeros((count, s.n_tasks)), np.full((count, s.n_tasks), -1))
+        # inserting j at slot n: leave from loc_n at free_n
+        free = np.concatenate([np.zeros((count, 1)), finish], axis=1)                     # (A, P+1)
+        to_task = np.concatenate([from_start[:, None, :], self.dist_task_task[padded]], axis=1)  # (A, P+1, M)
+        arrive = free[:, :, None] + to_task / speed[:, None, None]
+        begin = np.maximum(arrive, self.earliest)
+        slots_open = np.arange(width + 1)[None, :] <= lengths[:, None]                   # (A, P+1)
+        ok = (arrive < self.deadline) & self.doable & slots_open[:, :, None]
+        gain = self.pay * np.exp(-self.lam * (begin - s.task_start))
         if self.distance_cost == "leg":
             detour = to_task.copy()
-            if k:
-                prev_to_next = np.concatenate(([self.dist_agent_task[agent, path_arr[0]]],
-                                               self.dist_task_task[path_arr[:-1], path_arr[1:]]))
-                detour[:k] += self.dist_task_task[path_arr] - prev_to_next[:, None]
+            detour[:, :width] += np.where(present[:, :, None], self.dist_task_task[padded] - leg[:, :, None], 0.0)
             gain -= self.gamma * detour
         else:
-            gain -= self.gamma * self.dist_agent_task[agent][None, :]
-        if k:
-            # arrival delay D at p_n when j is inserted at slot n < k
-            delay = (start[:k] + s.task_duration[None, :] + self.dist_task_task[path_arr] / speed
-                     - sched.arrival[:, None])
-            delay = np.maximum(delay, 0.0)
-            wait = sched.start - sched.arrival
-            if self.marginal_gain == "frozen":
-                feasible[:k] &= delay <= wait[:, None]
-            else:
-                cum = np.concatenate(([0.0], np.cumsum(wait)))                     # (k+1,)
-                later = np.arange(k)[None, :] >= np.arange(k)[:, None]             # (n, r): r ≥ n
-                before_r = np.where(later, cum[None, :k] - cum[:k, None], np.inf)   # waits in [n, r)
-                through_r = np.where(later, cum[None, 1:] - cum[:k, None], np.inf)  # waits in [n, r]
-                arr_delay = np.maximum(delay[:, :, None] - before_r[:, None, :], 0.0)   # (n, M, r)
-                st_delay = np.maximum(delay[:, :, None] - through_r[:, None, :], 0.0)
-                slack = self.deadline[path_arr] - sched.arrival                        # (r,)
-                feasible[:k] &= np.all(arr_delay < slack[None, None, :], axis=2)
-                gain[:k] += np.sum(sched.reward[None, None, :] * np.expm1(-self.lam * st_delay), axis=2)
-        gain = np.where(feasible, gain, -np.inf)
-        slot = np.argmax(gain, axis=0)
-        best = gain[slot, np.arange(s.n_tasks)]
-        ok = best > 0
-        if k:
-            ok[path_arr] = False
-        return np.where(ok, best, 0.0), np.where(ok, slot, -1)
+            gain -= self.gamma * from_start[:, None, :]
+        ok &= gain > 0                    # later tasks can only lose, so these slots can never pay
+        if width:
+            # triples (agent, slot n < len(path), task) with a later task to delay
+            a_idx, n_idx, j_idx = np.nonzero(ok[:, :width] & present[:, :, None])
+            if a_idx.size:
+                delay = (begin[a_idx, n_idx, j_idx] + s.task_duration[j_idx]
+                         + self.dist_task_task[padded[a_idx, n_idx], j_idx] / speed[a_idx])
+                delay = np.maximum(delay - arrival[a_idx, n_idx], 0.0)                        # D, (K,)
+                wait = np.where(present, start - arrival, 0.0)
+                if self.marginal_gain == "frozen":
+                    fits = delay <= wait[a_idx, n_idx]
+                    ok[a_idx[~fits], n_idx[~fits], j_idx[~fits]] = False
+                else:
+                    fits, loss = self._propagate_delay(delay, a_idx, n_idx, lengths, arrival, wait, reward, padded)
+                    ok[a_idx, n_idx, j_idx] = fits
+                    gain[a_idx, n_idx, j_idx] += loss
+        gain = np.where(ok, gain, -np.inf)
+        slot = np.argmax(gain, axis=1)                                                    # (A, M): earliest slot
+        best = np.take_along_axis(gain, slot[:, None, :], axis=1)[:, 0, :]
+        best[np.nonzero(present)[0], padded[present]] = 0.0                                # j ∈ p_i: c_ij = 0
+        positive = best > 0
+        return Plan(timing, np.where(positive, best, 0.0), np.where(positive, slot, -1))
 
 
-def member_matrix(scenario: Scenario, paths: Sequence[Sequence[int]]) -> np.ndarray:
-    """(N, M) bool: agent i has task j on its own path (ground truth, spec cbga §1.7)."""
-    members = np.zeros((scenario.n_agents, scenario.n_tasks), dtype=bool)
-    for i, path in enumerate(paths):
-        members[i, list(path)] = True
-    return members
+    def _propagate_delay(self, delay: np.ndarray, a_idx: np.ndarray, n_idx: np.ndarray, lengths: np.ndarray,
+                         arrival: np.ndarray, wait: np.ndarray, reward: np.ndarray,
+                         padded: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Push each arrival delay D down the path from slot n: feasibility and reward change of the later tasks.
+
+        At later task r the start slips by max(0, d − w_r) (d: its arrival delay, w_r: its waiting time), which is
+        the next task's arrival delay, and its reward scales by exp(−λ·slip). A delay absorbed by waiting stops, so
+        only the still-delayed triples are carried to the next position.
+        """
+        fits = np.ones(len(delay), dtype=bool)
+        loss = np.zeros(len(delay))
+        live = np.arange(len(delay))
+        d = delay
+        offset = 0
+        while live.size:
+            a = a_idx[live]
+            r = n_idx[live] + offset
+            on_path = r < lengths[a]
+            live, d, a, r = live[on_path], d[on_path], a[on_path], r[on_path]
+            late = d >= self.deadline[padded[a, r]] - arrival[a, r]                 # (3.7) breaks at task r
+            fits[live[late]] = False
+            slip = d - wait[a, r]
+            delayed = slip > 0
+            loss[live[delayed]] += reward[a[delayed], r[delayed]] * np.expm1(-self.lam * slip[delayed])
+            carry = delayed & ~late
+            live, d = live[carry], slip[carry]
+            offset += 1
+        return fits, loss
+
+
+@dataclasses.dataclass(frozen=True)
+class Timing:
+    """Schedules of a batch of paths as padded (A, P) arrays; ``path`` holds task ids, ``length`` the real sizes."""
+
+    path: np.ndarray
+    length: np.ndarray
+    arrival: np.ndarray
+    start: np.ndarray
+    finish: np.ndarray
+    reward: np.ndarray      # 0 on padding
+    cost: np.ndarray        # 0 on padding
+    feasible: np.ndarray    # (A,)
+
+    def schedule(self, a: int) -> Schedule:
+        k = int(self.length[a])
+        return Schedule(tuple(int(j) for j in self.path[a, :k]), self.arrival[a, :k].copy(),
+                        self.start[a, :k].copy(), self.finish[a, :k].copy(), self.reward[a, :k].copy(),
+                        self.cost[a, :k].copy(), bool(self.feasible[a]))
+
+
+@dataclasses.dataclass(frozen=True)
+class Plan:
+    """Timing of a batch of paths, and each agent's marginal gain and best slot for every task."""
+
+    timing: Timing
+    gain: np.ndarray     # (A, M) c_ij
+    slot: np.ndarray     # (A, M) n_ij, −1 where c_ij = 0
+
+    @property
+    def schedules(self) -> list[Schedule]:
+        return [self.timing.schedule(a) for a in range(len(self.gain))]
 
 
 def equipment_covered(scenario: Scenario, members: np.ndarray) -> np.ndarray:
@@ -189,7 +256,53 @@ class TeamScore:
     conflicts: np.ndarray       # (M,) bool, more than L_j members
 
 
-def team_score(model: ScoringModel, schedules: Sequence[Schedule], conflict_policy: str = "first_L_paid") -> TeamScore:
+@dataclasses.dataclass
+class PathTable:
+    """Each agent's own path as (N, M) arrays: membership, reward if paid, start time; and total travel cost."""
+
+    members: np.ndarray     # (N, M) bool
+    reward: np.ndarray      # (N, M)
+    start: np.ndarray       # (N, M), inf off the path
+    cost: np.ndarray        # (N,)
+
+    @classmethod
+    def empty(cls, n_agents: int, n_tasks: int) -> PathTable:
+        return cls(np.zeros((n_agents, n_tasks), dtype=bool), np.zeros((n_agents, n_tasks)),
+                   np.full((n_agents, n_tasks), np.inf), np.zeros(n_agents))
+
+    @classmethod
+    def of(cls, schedules: Sequence[Schedule], n_tasks: int) -> PathTable:
+        table = cls.empty(len(schedules), n_tasks)
+        for i, schedule in enumerate(schedules):
+            table.set(i, schedule)
+        return table
+
+    def set_rows(self, agents: Sequence[int], timing: Timing) -> None:
+        """Overwrite the rows of ``agents`` with the paths of ``timing`` (row a of timing → agent agents[a])."""
+        agents = np.asarray(agents, dtype=np.int64)
+        self.members[agents] = False
+        self.reward[agents] = 0.0
+        self.start[agents] = np.inf
+        a, r = np.nonzero(np.arange(timing.path.shape[1])[None, :] < timing.length[:, None])
+        rows, tasks = agents[a], timing.path[a, r]
+        self.members[rows, tasks] = True
+        self.reward[rows, tasks] = timing.reward[a, r]
+        self.start[rows, tasks] = timing.start[a, r]
+        self.cost[agents] = timing.cost.sum(axis=1)
+
+    def set(self, agent: int, schedule: Schedule) -> None:
+        path = list(schedule.path)
+        self.members[agent] = False
+        self.reward[agent] = 0.0
+        self.start[agent] = np.inf
+        self.members[agent, path] = True
+        self.reward[agent, path] = schedule.reward
+        self.start[agent, path] = schedule.start
+        self.cost[agent] = schedule.cost.sum()
+
+
+def team_score(model: ScoringModel, paths: Sequence[Schedule] | PathTable,
+               conflict_policy: str = "first_L_paid") -> TeamScore:
     """Score = Σ_i Σ_{j∈p_i} (z_j · reward_ij − cost_ij): only valid tasks pay, travel always costs (spec cbga §1.7).
 
     A task is valid when exactly L_j members hold it, their equipment covers te_j and its prerequisites are valid.
@@ -197,23 +310,17 @@ def team_score(model: ScoringModel, schedules: Sequence[Schedule], conflict_poli
     agent id first) are paid if they form a valid group; under ``none_paid`` nobody is.
     """
     s = model.scenario
-    n, m = s.n_agents, s.n_tasks
-    members = member_matrix(s, [sch.path for sch in schedules])
-    start_at = np.full((n, m), np.inf)
-    for i, sch in enumerate(schedules):
-        start_at[i, list(sch.path)] = sch.start
+    table = paths if isinstance(paths, PathTable) else PathTable.of(paths, s.n_tasks)
+    members = table.members
     count = members.sum(axis=0)
     conflicts = count > s.task_agents
     paid = members & (count == s.task_agents)[None, :]
     if conflicts.any() and conflict_policy == "first_L_paid":
         for j in np.flatnonzero(conflicts):
-            order = sorted(np.flatnonzero(members[:, j]), key=lambda i: (start_at[i, j], -i))
+            order = sorted(np.flatnonzero(members[:, j]), key=lambda i: (table.start[i, j], -i))
             paid[order[: s.task_agents[j]], j] = True
     valid = paid.any(axis=0) & equipment_covered(s, paid)
     valid = prerequisites_valid(s, valid)
     paid &= valid[None, :]
-    agent_scores = np.zeros(n)
-    for i, sch in enumerate(schedules):
-        if sch.path:
-            agent_scores[i] = float(sch.reward[paid[i, list(sch.path)]].sum() - sch.cost.sum())
-    return TeamScore(float(agent_scores.sum()), agent_scores, members, paid, valid, conflicts)
+    agent_scores = np.where(paid, table.reward, 0.0).sum(axis=1) - table.cost
+    return TeamScore(float(agent_scores.sum()), agent_scores, members.copy(), paid, valid, conflicts)
