@@ -109,14 +109,3 @@ class LocalKnowledge:
             if self.bids[i, i, j] > 0:
                 self.set_bid(i, i, j, 0.0)
         return dropped[1:]
-
-    def copy(self) -> LocalKnowledge:
-        return LocalKnowledge(**{f.name: _copy(getattr(self, f.name)) for f in dataclasses.fields(self)})
-
-
-def _copy(value):
-    if isinstance(value, np.ndarray):
-        return value.copy()
-    if isinstance(value, list):
-        return [list(v) for v in value]
-    return value

@@ -40,10 +40,6 @@ class CommGraph:
     def n_agents(self) -> int:
         return len(self.adjacency)
 
-    @property
-    def connected(self) -> bool:
-        return bool(np.all(np.isfinite(self.hops)))
-
 
 def _hop_distances(adjacency: np.ndarray) -> np.ndarray:
     """All-pairs hop counts by breadth-first search over boolean matrix powers (inf where unreachable)."""

@@ -151,19 +151,6 @@ class Scenario:
                 reasons[j] = f"needs more agents with {short} than the scenario has"
         return reasons
 
-    def to_entities(self) -> tuple[list[Agent], list[Task]]:
-        """The explicit records this scenario was (or could have been) built from."""
-        names = self.equipment_names
-        agents = [Agent(tuple(map(float, self.agent_pos[i])), float(self.agent_speed[i]),
-                        tuple(names[e] for e in np.flatnonzero(self.agent_equipment[i])))
-                  for i in range(self.n_agents)]
-        tasks = [Task(tuple(map(float, self.task_pos[j])), float(self.task_reward[j]), float(self.task_start[j]),
-                      float(self.task_end[j]), float(self.task_duration[j]), int(self.task_agents[j]),
-                      tuple(n for e, n in enumerate(names) for _ in range(int(self.task_equipment[j, e]))),
-                      tuple(int(m) for m in np.flatnonzero(self.task_prereqs[j])))
-                 for j in range(self.n_tasks)]
-        return agents, tasks
-
     @classmethod
     def from_entities(cls, agents: Sequence[Agent], tasks: Sequence[Task], *, time_discount: float = 0.8,
                       distance_discount: float = 0.8, arena: tuple[float, float, float] | None = None,
