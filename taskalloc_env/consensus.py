@@ -48,7 +48,9 @@ def exchange(knowledge: LocalKnowledge, graph: CommGraph, now: int, required_age
     sent_winner = kn.winner.copy()
     sent_winning_bid = kn.winning_bid()
     sent_stamps = kn.timestamps.copy()
-    sent_agents = (sent_bids > 0).any(axis=2)                  # agents named in each sender's triples
+    # agents named in each message: the (agentID, time) pairs of the sender's timestamps cover every agent it knows,
+    # the bid triples name only agents it knows (spec cbga §2.2, Table 4.5)
+    sent_agents = kn.known.copy()
     single_idx = np.flatnonzero(kn.single)
     multi_idx = np.flatnonzero(~kn.single)
     multi_eq = equipment.subset(multi_idx)
@@ -81,7 +83,6 @@ def exchange(knowledge: LocalKnowledge, graph: CommGraph, now: int, required_age
             changed |= diff
         kn.timestamps[receivers, senders] = now
         kn.known[receivers] |= sent_agents[senders]
-        kn.known[receivers, senders] = True
         informative[receivers] += changed
 
     relayed = np.where(graph.adjacency[:, :, None], sent_stamps[None, :, :], -np.inf).max(axis=1)
