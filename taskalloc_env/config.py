@@ -54,7 +54,8 @@ CHOICES: dict[str, tuple[str, ...]] = {
 class TaskMix:
     """``count`` tasks needing ``agents`` agents and the equipment multiset ``equipment`` (spec cbga §1.4).
 
-    With equipment and no explicit ``agents``, a task needs one agent per equipment item (|te_j| = L_j, [T3.1.3]).
+    With equipment, a task needs one agent per equipment item (|te_j| = L_j, [T3.1.3]); ``agents`` alone gives
+    tasks any agent may join.
     """
 
     count: int
@@ -211,8 +212,10 @@ def _validate(cfg: TaskAllocConfig) -> None:
             _check_positive_int("task_mix.count", mix.count, minimum=0)
             if mix.agents is not None:
                 _check_positive_int("task_mix.agents", mix.agents)
-            if mix.equipment and mix.agents is not None and mix.agents < len(mix.equipment):
-                _fail("task_mix.agents", mix.agents, f">= the number of equipment items {len(mix.equipment)}")
+            if mix.equipment and mix.agents is not None and mix.agents != len(mix.equipment):
+                _fail("task_mix.agents", mix.agents,
+                      f"the number of equipment items {len(mix.equipment)} (|te_j| = L_j, spec cbga §1.1), "
+                      "or leave agents out")
             known = set(cfg.agent_types or ())
             for item in mix.equipment:
                 if item not in known:

@@ -76,13 +76,14 @@ class ObservationLayout:
         """(…, M) one feature of every task."""
         return self.split(obs)[1][..., self.task_column(name)]
 
-    def bounds(self, max_agents_per_task: int, max_rounds: int) -> tuple[np.ndarray, np.ndarray]:
+    def bounds(self, max_agents_per_task: int, max_rounds: int, n_agents: int) -> tuple[np.ndarray, np.ndarray]:
         own_low = np.zeros(self.own_size)
         own_low[:3] = -1.0                       # positions / arena; explicit scenarios may sit below 0
         own_high = np.ones(self.own_size)
         task_low = np.zeros(self.task_size)
         task_high = np.ones(self.task_size)
         task_high[self.task_column("group_total")] = max_agents_per_task
+        task_high[self.task_column("required_agents")] = max(1.0, max_agents_per_task / n_agents)
         task_high[self.task_column("rounds_since_change")] = max_rounds
         for name in ("dx", "dy", "dz"):
             task_low[self.task_column(name)] = -2.0
@@ -100,7 +101,7 @@ class ObservationBuilder:
         """``max_agents_per_task`` and ``max_rounds`` bound every instance the env can draw (for the space)."""
         s = protocol.scenario
         self.layout = ObservationLayout(s.n_tasks, len(s.equipment_names))
-        self.low, self.high = self.layout.bounds(max_agents_per_task, max_rounds)
+        self.low, self.high = self.layout.bounds(max_agents_per_task, max_rounds, s.n_agents)
         self.reward_unit = float(s.task_reward.max()) or 1.0
         finite_end = s.task_end[np.isfinite(s.task_end)]
         self.horizon = float(finite_end.max()) if finite_end.size and finite_end.max() > 0 else 1.0

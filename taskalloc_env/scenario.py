@@ -97,9 +97,17 @@ class Scenario:
             raise ValueError(f"positions must lie within ±arena {self.arena} on every axis")
         if np.any(self.task_duration < 0) or np.any(self.task_reward < 0):
             raise ValueError("task durations and rewards must be >= 0")
-        if np.any(self.task_equipment.sum(axis=1) > self.task_agents):
-            bad = np.flatnonzero(self.task_equipment.sum(axis=1) > self.task_agents).tolist()
-            raise ValueError(f"tasks {bad} require more equipment items than agents (|te_j| > L_j)")
+        items = self.task_equipment.sum(axis=1)
+        if np.any((items > 0) & (items != self.task_agents)):
+            bad = np.flatnonzero((items > 0) & (items != self.task_agents)).tolist()
+            raise ValueError(f"tasks {bad} require a number of equipment items other than L_j: a task's equipment "
+                             "names one item per agent, |te_j| = L_j, or none at all (spec cbga §1.1, [T3.1.3]; "
+                             "decoupling L_j from te_j is future work, §7.2)")
+        if np.any(self.agent_equipment.sum(axis=1) > 1):
+            bad = np.flatnonzero(self.agent_equipment.sum(axis=1) > 1).tolist()
+            raise ValueError(f"agents {bad} carry several equipment items; every agent carries one type or none "
+                             "(spec cbga §1.4: |ae_i| = 1 in every experiment; with several items the group rules "
+                             "of §3.4/§4.3 depend on the order members join)")
         if np.any(np.diag(self.task_prereqs)):
             raise ValueError("a task cannot be its own prerequisite (j ∉ P_j, spec cbga §1.1)")
         if _has_cycle(self.task_prereqs):
