@@ -91,8 +91,13 @@ def known_capacity(knowledge: LocalKnowledge, scenario: Scenario, equipment_matc
 
 def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment, equipment_match: np.ndarray,
              gain: np.ndarray, slot: np.ndarray, *, prereq_mode: str, require_known_capacity: bool,
-             max_bundle: int) -> BidView:
-    """The bidding situation of every agent, computed from its local table only."""
+             max_bundle: int, fillable: np.ndarray) -> BidView:
+    """The bidding situation of every agent, computed from its local table only.
+
+    ``fillable`` (M,) marks the tasks some team of the scenario can complete: every agent knows all agents'
+    equipment (spec cbga §2.1), so the capacity filter of §3.3 applies with everyone known; with
+    ``require_known_capacity`` the agents that i has discovered must suffice as well.
+    """
     n, m = gain.shape
     agents = np.arange(n)
     bids = knowledge.bids
@@ -134,7 +139,7 @@ def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment
 
     complete = complete_groups(bids, scenario) if prereq_mode == "all_complete" else None
     prereqs_met = prerequisites_met(scenario, prereq_mode, counts, complete)
-    eligible = equipment_match & prereqs_met & ~in_bundle
+    eligible = equipment_match & prereqs_met & ~in_bundle & fillable[None, :]
     if require_known_capacity:
         eligible &= known_capacity(knowledge, scenario, equipment_match)
     eligible &= knowledge.quit_members == NEVER

@@ -57,6 +57,8 @@ class Protocol:
         self.graph = CommGraph(scenario.agent_pos, cfg.comm_range, cfg.edge_rule)
         self.equipment = Equipment(scenario.agent_equipment, scenario.task_equipment)
         self.equipment_match = scenario.eligible()
+        self.fillable = np.ones(scenario.n_tasks, dtype=bool)
+        self.fillable[list(scenario.infeasible_tasks())] = False
         self.max_bundle = cfg.max_bundle or scenario.n_tasks
         self.max_rounds = cfg.max_rounds or round_bound(scenario.n_tasks, scenario.n_agents,
                                                         int(scenario.task_agents.max()), self.graph.diameter)
@@ -111,7 +113,7 @@ class Protocol:
             self._view = bid_view(self.knowledge, self.scenario, self.equipment, self.equipment_match,
                                   self._gain.copy(), self._slot.copy(), prereq_mode=self.cfg.prereq_mode,
                                   require_known_capacity=self.cfg.require_known_capacity,
-                                  max_bundle=self.max_bundle)
+                                  max_bundle=self.max_bundle, fillable=self.fillable)
         return self._view
 
     def score(self) -> TeamScore:
@@ -159,6 +161,8 @@ class Protocol:
             reasons.append("the task is already in its bundle")
         if not v.equipment_match[agent, task]:
             reasons.append("its equipment does not match te_j")
+        if not self.fillable[task]:
+            reasons.append("no team of this scenario can complete it (too few capable agents)")
         if not v.prereqs_met[agent, task]:
             reasons.append(f"prerequisites are not met ({self.cfg.prereq_mode})")
         if v.gain[agent, task] <= 0:

@@ -193,8 +193,8 @@ def expected_bid_mask(env: TaskAllocEnv, i: int) -> tuple[np.ndarray, np.ndarray
                                  "any_has_bid": any(has_bid)}[cfg.prereq_mode]:
             continue                                                        # filter 2: prerequisites
         L = int(s.task_agents[j])
-        if cfg.require_known_capacity and L > 1:                            # filter 4
-            known = np.flatnonzero(kn.known[i])
+        if L > 1:              # filter 4: everyone is known (§2.1) unless the agents discover each other
+            known = np.flatnonzero(kn.known[i]) if cfg.require_known_capacity else np.arange(s.n_agents)
             able = [k for k in known if not te or ae[k] & set(te)]
             have = s.agent_equipment[known].sum(axis=0)
             if len(able) < L or not np.all(have >= s.task_equipment[j]):

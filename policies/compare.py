@@ -1,0 +1,180 @@
+"""``python -m policies compare``: every baseline (and a committed learned policy) on the same seeds of a scenario.
+
+    python -m policies compare --scenario default --episodes 20 --out results/compare
+
+Rows: random, CBBA (only where every L_j = 1), CBGA, CBGA+TQ, CBGA+TB, CBGABI, the centralised greedy SGAMA
+(spec cbga §6.7; no rounds or messages) and, for every committed checkpoint ``models/*/model.zip`` whose
+observation layout fits the scenario, the learned policy. Seed s is the same instance for every row (paired design,
+spec cbga §6.1). The table gives mean ± sd of the score (spec cbga §1.7), valid tasks, consensus rounds and
+messages received (``msgs / agent`` = messages / N_n, the thesis's per-agent communication steps), episodes that
+hit the round bound (kept, counted), and the paired comparison with CBGA (mean difference, paired t-test p-value,
+share of seeds won). ``--out DIR`` writes ``compare.md``, ``compare.csv`` (the table), ``episodes.csv`` and
+``compare.png`` (score bars with sd; per-seed differences against CBGA).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from taskalloc_env import TaskAllocConfig, resolve_config
+from taskalloc_env.env import TaskAllocEnv
+from training.evaluation import Episode, default_jobs, policy_for, run_episodes, skip_reason, solver_name
+from training.report import (
+    bar_and_differences,
+    cell_text,
+    compare_cells,
+    markdown_table,
+    not_converged,
+    values,
+    write_csv,
+)
+from training.stats import format_p, mean_sd
+
+ROOT = Path(__file__).resolve().parent.parent
+BASELINES = ("random", "cbba", "cbga", "cbga+tq", "cbga+tb", "cbgabi", "sgama")
+REFERENCE = "CBGA"
+COLUMNS = (("score", "score"), ("valid_tasks", "valid tasks"), ("rounds", "rounds"), ("messages", "messages"),
+           ("comm_steps", "msgs / agent"))
+
+
+def learned_checkpoints(root: Path = ROOT / "models") -> list[Path]:
+    """Committed checkpoints: ``models/<run>/model.zip``, in name order."""
+    return sorted(root.glob("*/model.zip")) if root.is_dir() else []
+
+
+def usable_learned(path: Path, cfg: TaskAllocConfig) -> tuple[str | None, str]:
+    """(solver name, '') if the checkpoint loads and fits ``cfg``'s observations, else (None, why not)."""
+    solver = f"learned:{path}"
+    try:
+        policy = policy_for(solver)
+        env = TaskAllocEnv(cfg, **policy.env_overrides)
+        env.reset(seed=0)
+        policy.start(env, 0)
+    except ImportError as exc:
+        return None, f"learned policy {path}: skipped, it needs the training extras ({exc})"
+    except (ValueError, FileNotFoundError, KeyError, RuntimeError) as exc:
+        return None, f"learned policy {path}: skipped, it does not fit this scenario ({exc})"
+    return solver, ""
+
+
+def display_name(solver: str) -> str:
+    if solver.startswith("learned:"):
+        path = Path(solver.split(":", 1)[1])
+        return f"learned ({path.parent.name if path.name == 'model.zip' else path.stem})"
+    return solver_name(solver)
+
+
+def summary(rows: Sequence[dict[str, Any]], order: Sequence[str]) -> tuple[str, list[dict[str, Any]]]:
+    """The markdown table and its CSV records (one per policy, in ``order``)."""
+    cells = {name: [r for r in rows if r["policy"] == name] for name in order}
+    reference = cells.get(REFERENCE)
+    body, records = [], []
+    for name in order:
+        cell = cells[name]
+        record: dict[str, Any] = {"policy": name, "episodes": len(cell), "not_converged": not_converged(cell)}
+        texts = []
+        for metric, _ in COLUMNS:
+            mean, sd = mean_sd(values(cell, metric)) if cell[0].get(metric) is not None else (None, None)
+            record[f"{metric}_mean"], record[f"{metric}_sd"] = mean, sd
+            texts.append(cell_text(cell, metric).split(" (")[0])
+        paired = ["–", "–", "–"]
+        if reference is not None and name != REFERENCE:
+            pc = compare_cells(cell, reference, "score")
+            record.update(diff_vs_cbga=pc.mean_diff, p_t_vs_cbga=pc.p_t, p_wilcoxon_vs_cbga=pc.p_wilcoxon,
+                          beats_cbga=pc.better, ties_cbga=pc.tied)
+            paired = [f"{pc.mean_diff:+.0f}", format_p(pc.p_t), f"{100 * pc.better:.0f} %"]
+        body.append([name, *texts, record["not_converged"], *paired])
+        records.append(record)
+    header = ["policy", *(label for _, label in COLUMNS), "not conv.", f"Δ vs {REFERENCE}", "p (t)",
+              f"beats {REFERENCE}"]
+    return markdown_table(header, body), records
+
+
+def compare(scenario: str, episodes: int, overrides: dict[str, Any], jobs: int = 1, out: Path | None = None,
+            learned: Sequence[Path] | None = None, progress: bool = False) -> str:
+    """Run the comparison; returns the report text (also written to ``out`` when given)."""
+    cfg = resolve_config(scenario, **overrides)
+    notes, solvers = [], []
+    for solver in BASELINES:
+        reason = skip_reason(solver, cfg)
+        if reason:
+            notes.append(f"{solver_name(solver)}: not run: {reason}.")
+        else:
+            solvers.append(solver)
+    checkpoints = learned_checkpoints() if learned is None else list(learned)
+    if not checkpoints:
+        notes.append("learned policy: no committed checkpoint (models/<run>/model.zip), row left out.")
+    for path in checkpoints:
+        solver, why = usable_learned(path, cfg)
+        if solver:
+            solvers.append(solver)
+        else:
+            notes.append(why + ".")
+    names = {s: display_name(s) for s in solvers}
+    runs = [Episode(s, cfg, seed, (("policy", names[s]),)) for s in solvers for seed in range(episodes)]
+    rows = run_episodes(runs, jobs=jobs, progress=progress, desc="compare")
+    table, records = summary(rows, [names[s] for s in solvers])
+    setting = (f"Scenario `{scenario}`{''.join(f', {k}={v}' for k, v in overrides.items())}: {cfg.n_agents} agents, "
+               f"{cfg.n_tasks} tasks, L_j = {_agents_text(cfg)}; {episodes} paired seeds (0–{episodes - 1}).")
+    legend = ("score = rewards of valid tasks − travel cost (spec cbga §1.7); messages = messages received in total "
+              "(one per sender → receiver per round); msgs / agent = messages / N_n, the thesis's communication steps; "
+              "not conv. = episodes that hit the round bound (kept in the means); SGAMA is centralised (no rounds or "
+              f"messages). Δ, p (paired t-test) and beats (share of seeds with a higher score) are against "
+              f"{REFERENCE} on the same seeds.")
+    text = "\n".join([setting, "", table, legend, *(f"- {n}" for n in notes)]) + "\n"
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "compare.md").write_text(f"# Policy comparison\n\n{text}\n![scores](compare.png)\n")
+        write_csv(out / "compare.csv", records)
+        write_csv(out / "episodes.csv", rows)
+        cells = {name: [r for r in rows if r["policy"] == name] for name in names.values()}
+        bar_and_differences(out / "compare.png", cells, REFERENCE if REFERENCE in cells else None, "score",
+                            f"{scenario}: score over {episodes} paired seeds")
+    return text
+
+
+def _agents_text(cfg: TaskAllocConfig) -> str:
+    if cfg.task_mix:
+        return "/".join(str(m.required_agents) for m in cfg.task_mix) + " (task mix)"
+    apt = cfg.agents_per_task
+    return "{" + ", ".join(map(str, apt)) + "}" if isinstance(apt, tuple) else str(apt)
+
+
+def _override(text: str) -> tuple[str, Any]:
+    if "=" not in text:
+        raise argparse.ArgumentTypeError(f"--set takes FIELD=VALUE, got {text!r}")
+    key, value = text.split("=", 1)
+    return key.strip(), yaml.safe_load(value)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--scenario", default="default", help="scenario name (configs/scenarios) or YAML path")
+    parser.add_argument("--episodes", type=int, default=20, help="paired seeds 0..N-1 (default 20)")
+    parser.add_argument("--set", dest="overrides", type=_override, action="append", default=[],
+                        metavar="FIELD=VALUE", help="config override, e.g. --set agents_per_task=1 (repeatable)")
+    parser.add_argument("--out", type=Path, default=None, help="write compare.md/.csv/.png and episodes.csv here")
+    parser.add_argument("--jobs", type=int, default=1, help=f"worker processes (this machine: {default_jobs()})")
+    parser.add_argument("--learned", type=Path, action="append", default=None,
+                        help="checkpoint(s) to include (default: every models/<run>/model.zip)")
+    parser.add_argument("--no-learned", action="store_true", help="leave learned policies out")
+    parser.add_argument("--progress", action="store_true", help="show a progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.episodes < 2:
+        raise SystemExit("--episodes must be at least 2 (standard deviations and paired tests need two seeds)")
+    started = time.perf_counter()
+    learned = [] if args.no_learned else args.learned
+    text = compare(args.scenario, args.episodes, dict(args.overrides), args.jobs, args.out, learned, args.progress)
+    print(text, end="")
+    if args.out is not None:
+        print(f"written: {args.out}/compare.md, compare.csv, episodes.csv, compare.png")
+    print(f"({time.perf_counter() - started:.1f} s)", file=sys.stderr)
+    return 0

@@ -1,0 +1,56 @@
+"""``python -m policies compare``: every row, CBBA only where it applies, outputs, determinism, learned skips."""
+
+from __future__ import annotations
+
+import csv
+
+from policies.__main__ import main
+
+BASELINE_ROWS = ("random", "CBGA", "CBGA+TQ", "CBGA+TB", "CBGABI", "SGAMA")
+
+
+def _table_rows(text: str) -> dict[str, list[str]]:
+    lines = [line for line in text.splitlines() if line.startswith("| ") and not line.startswith("| policy")]
+    return {cells[0]: cells[1:] for cells in ([c.strip() for c in line.strip("|").split("|")] for line in lines)}
+
+
+def test_compare_prints_every_baseline_on_the_default_scenario(capsys):
+    assert main(["compare", "--scenario", "default", "--episodes", "2", "--no-learned"]) == 0
+    out = capsys.readouterr().out
+    rows = _table_rows(out)
+    assert set(rows) == set(BASELINE_ROWS)                     # L_j = 4: no CBBA row
+    assert "CBBA: not run" in out
+    assert rows["SGAMA"][2] == "–" and rows["SGAMA"][3] == "–"   # centralised: no rounds, no messages
+    assert all("±" in rows[name][0] for name in BASELINE_ROWS)
+
+
+def test_cbba_row_appears_when_every_task_needs_one_agent(capsys):
+    main(["compare", "--episodes", "2", "--set", "agents_per_task=1", "--set", "n_agents=4", "--set", "n_tasks=8",
+          "--no-learned"])
+    rows = _table_rows(capsys.readouterr().out)
+    assert set(rows) == {*BASELINE_ROWS, "CBBA"}
+
+
+def test_compare_is_deterministic_and_writes_table_and_plot(tmp_path, capsys):
+    argv = ["compare", "--episodes", "3", "--set", "n_agents=5", "--set", "n_tasks=8", "--no-learned"]
+    main([*argv, "--out", str(tmp_path)])
+    first = capsys.readouterr().out
+    main([*argv, "--jobs", "2"])
+    assert capsys.readouterr().out.split("written:")[0] == first.split("written:")[0]
+    for name in ("compare.md", "compare.csv", "episodes.csv", "compare.png"):
+        assert (tmp_path / name).stat().st_size > 0
+    with open(tmp_path / "compare.csv", newline="") as fh:
+        records = list(csv.DictReader(fh))
+    assert [r["policy"] for r in records] == list(BASELINE_ROWS)
+    with open(tmp_path / "episodes.csv", newline="") as fh:
+        episodes = list(csv.DictReader(fh))
+    assert len(episodes) == 3 * len(BASELINE_ROWS)
+    assert len({(r["seed"], r["instance"]) for r in episodes}) == 3   # paired: one instance per seed
+
+
+def test_missing_learned_checkpoint_is_skipped_with_a_note(tmp_path, capsys):
+    main(["compare", "--episodes", "2", "--set", "n_agents=4", "--set", "n_tasks=6",
+          "--learned", str(tmp_path / "run" / "model.zip")])
+    out = capsys.readouterr().out
+    assert "skipped" in out and str(tmp_path / "run") in out
+    assert set(_table_rows(out)) == set(BASELINE_ROWS)

@@ -1,0 +1,150 @@
+"""Paired evaluation: several solvers on the same seeds, one row of figures per episode, parallel over processes.
+
+A *solver* is a policy name (``random``, ``cbba``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi``,
+``learned:<checkpoint>``, see ``policies.make_policy``) or a centralised solver (``sgama``, ``exact``). Seed s
+generates the same scenario instance for every solver (spec cbga §6.1, [T5.3.1] paired design): the environment
+draws the instance from ``reset(seed=s)`` before any policy acts, and each row carries a fingerprint of the instance
+so that the pairing can be checked. Policies that need protocol options (``env_overrides``, e.g. task quitting)
+get an environment built with them; those options do not touch the instance generator.
+
+Communication steps (spec cbga §6.2): ``messages`` counts every message received (one per sender → receiver
+pair per round); ``comm_steps`` = messages / N_n, the per-agent count whose magnitudes match the thesis's Fig 3.11.
+Centralised solvers have no rounds or messages (left empty). Episodes that hit the round bound are kept and
+flagged ``converged = False``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import multiprocessing
+import os
+import sys
+from collections.abc import Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from policies import exact, make_policy, rollout, sgama
+from policies.base import Policy
+from policies.exact import MAX_AGENTS, MAX_TASKS
+from taskalloc_env import Scenario, TaskAllocConfig, TaskAllocEnv
+from taskalloc_env.config import max_required_agents
+
+CENTRALISED = {"sgama": ("SGAMA", sgama), "exact": ("exact", exact)}
+METRICS = ("score", "valid_tasks", "conflicts", "rounds", "messages", "comm_steps", "informative_messages",
+           "data_items", "bids", "quits")
+PROTOCOL_METRICS = ("rounds", "messages", "comm_steps", "informative_messages", "data_items", "quits")
+
+
+@dataclasses.dataclass(frozen=True)
+class Episode:
+    """One run: ``solver`` on the instance ``seed`` of ``config``; ``labels`` are copied into the result row."""
+
+    solver: str
+    config: TaskAllocConfig
+    seed: int
+    labels: tuple[tuple[str, Any], ...] = ()
+
+
+def skip_reason(solver: str, cfg: TaskAllocConfig) -> str | None:
+    """Why ``solver`` does not apply to ``cfg`` (None if it does): CBBA needs every L_j = 1, exact small sizes."""
+    key = solver.lower()
+    if key == "cbba" and max_required_agents(cfg) > 1:
+        return "CBBA assigns single-agent tasks only (every L_j = 1)"
+    if key == "exact" and (cfg.n_agents > MAX_AGENTS or cfg.n_tasks > MAX_TASKS):
+        return f"exact enumerates; at most {MAX_AGENTS} agents x {MAX_TASKS} tasks"
+    return None
+
+
+def solver_name(solver: str) -> str:
+    """The display name: the policy's own name (``CBGA+TQ``), ``SGAMA`` or ``exact``."""
+    key = solver.lower()
+    if key in CENTRALISED:
+        return CENTRALISED[key][0]
+    return policy_for(solver).name
+
+
+@functools.cache
+def policy_for(solver: str) -> Policy:
+    """One policy object per solver name and process (a learned policy loads its checkpoint once)."""
+    return make_policy(solver)
+
+
+@functools.cache
+def _env(solver: str, cfg: TaskAllocConfig) -> TaskAllocEnv:
+    """One environment per (solver, config) and process, reused across seeds (reset draws a fresh instance)."""
+    key = solver.lower()
+    overrides = {} if key in CENTRALISED else policy_for(solver).env_overrides
+    return TaskAllocEnv(cfg, **overrides)
+
+
+def fingerprint(scenario: Scenario) -> str:
+    """A short hash of every array of the instance: equal fingerprints ⇔ the same problem (pairing check)."""
+    digest = hashlib.sha1()
+    for field in dataclasses.fields(scenario):
+        value = getattr(scenario, field.name)
+        digest.update(np.ascontiguousarray(value).tobytes() if isinstance(value, np.ndarray) else repr(value).encode())
+    return digest.hexdigest()[:12]
+
+
+def run_episode(episode: Episode) -> dict[str, Any]:
+    """Solve one instance; the row holds the labels, the solver, the seed, the fingerprint and the figures."""
+    key = episode.solver.lower()
+    env = _env(episode.solver, episode.config)
+    if key in CENTRALISED:
+        env.reset(seed=episode.seed)
+        allocation = CENTRALISED[key][1](env.unwrapped.scenario, env.config)
+    else:
+        allocation = rollout(env, policy_for(episode.solver), seed=episode.seed)
+    figures = allocation.summary()
+    n_agents = episode.config.n_agents
+    figures["comm_steps"] = figures["messages"] / n_agents
+    if key in CENTRALISED:
+        figures.update(dict.fromkeys(PROTOCOL_METRICS))
+    return {**dict(episode.labels), "solver": solver_name(episode.solver), "seed": episode.seed,
+            "instance": fingerprint(env.unwrapped.scenario), "n_agents": n_agents,
+            "n_tasks": episode.config.n_tasks, **{m: figures[m] for m in METRICS},
+            "converged": bool(figures["converged"]), "agreement": bool(figures["agreement"])}
+
+
+def default_jobs() -> int:
+    """Worker processes: every core this process may use."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def run_episodes(episodes: Sequence[Episode], jobs: int = 1, progress: bool = True,
+                 desc: str = "episodes") -> list[dict[str, Any]]:
+    """Run every episode (in ``jobs`` processes when > 1); rows come back in the order of ``episodes``."""
+    rows = []
+    with tqdm(total=len(episodes), desc=desc, disable=not progress, unit="ep", dynamic_ncols=True) as bar:
+        for row in _map(episodes, jobs):
+            rows.append(row)
+            bar.update()
+    return rows
+
+
+def _map(episodes: Sequence[Episode], jobs: int) -> Iterator[dict[str, Any]]:
+    if jobs <= 1 or len(episodes) < 2:
+        yield from map(run_episode, episodes)
+        return
+    chunksize = max(1, min(16, len(episodes) // (8 * jobs)))
+    # forking a process whose torch thread pools are up can deadlock the children (a learned policy loaded in
+    # this process); then workers start from a clean forkserver and load their own copy
+    context = multiprocessing.get_context("forkserver" if "torch" in sys.modules else "fork")
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+        yield from pool.map(run_episode, episodes, chunksize=chunksize)
+
+
+def check_pairing(rows: Sequence[dict[str, Any]], keys: Sequence[str]) -> list[str]:
+    """Groups of rows (same ``keys`` and seed) whose instances differ: empty for a paired design."""
+    seen: dict[tuple, str] = {}
+    broken = []
+    for row in rows:
+        group = (*(row.get(k) for k in keys), row["seed"])
+        if seen.setdefault(group, row["instance"]) != row["instance"]:
+            broken.append(f"{dict(zip([*keys, 'seed'], group))}: {row['solver']} saw another instance")
+    return broken

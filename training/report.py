@@ -1,0 +1,171 @@
+"""Result rows → arrays, markdown tables, CSV files and PNG plots (shared by the compare command and the runner).
+
+A *row* is one episode (``training.evaluation.run_episode``). Rows of one cell (same point, same series) are
+sorted by seed, so cells of different series line up seed by seed for the paired statistics (spec cbga §6.2).
+"""
+
+from __future__ import annotations
+
+import csv
+import textwrap
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from training.stats import PairedComparison, format_mean_sd, format_p, paired
+
+METRIC_LABELS = {
+    "score": "score", "valid_tasks": "valid tasks", "conflicts": "conflicts", "rounds": "rounds",
+    "messages": "messages", "comm_steps": "comm steps / agent", "informative_messages": "informative msgs",
+    "data_items": "data items", "bids": "bids", "quits": "quits",
+}
+METRIC_DIGITS = {"score": 0, "valid_tasks": 1, "conflicts": 1, "rounds": 1, "messages": 0, "comm_steps": 1,
+                 "informative_messages": 0, "data_items": 0, "bids": 0, "quits": 1}
+
+
+def values(rows: Iterable[Mapping[str, Any]], metric: str) -> np.ndarray:
+    """The metric of ``rows`` in seed order; missing values (None, '') become nan."""
+    ordered = sorted(rows, key=lambda r: int(r["seed"]))
+    return np.array([np.nan if r.get(metric) in (None, "") else float(r[metric]) for r in ordered])
+
+
+def seeds(rows: Iterable[Mapping[str, Any]]) -> list[int]:
+    return sorted(int(r["seed"]) for r in rows)
+
+
+def not_converged(rows: Iterable[Mapping[str, Any]]) -> int:
+    """Episodes that hit the round bound (kept in every figure, counted here)."""
+    return sum(str(r["converged"]) in ("False", "false", "0") for r in rows)
+
+
+def cell_text(rows: Sequence[Mapping[str, Any]], metric: str) -> str:
+    """``mean ± sd`` of a cell, with ``(k nc)`` when k of its episodes did not converge; ``–`` if no values."""
+    x = values(rows, metric)
+    x = x[~np.isnan(x)]
+    text = format_mean_sd(x, METRIC_DIGITS.get(metric, 1)) if x.size else "–"
+    bad = not_converged(rows)
+    return f"{text} ({bad} nc)" if bad else text
+
+
+def compare_cells(a: Sequence[Mapping[str, Any]], b: Sequence[Mapping[str, Any]], metric: str) -> PairedComparison:
+    """Paired figures of cell a against cell b; they must hold the same seeds."""
+    if seeds(a) != seeds(b):
+        raise ValueError("paired cells must hold the same seeds")
+    return paired(values(a, metric), values(b, metric))
+
+
+def markdown_table(header: Sequence[str], body: Iterable[Sequence[Any]], align: str | None = None) -> str:
+    """A GitHub markdown table; ``align`` is one character per column (l, r, c), default left then right."""
+    align = align or "l" + "r" * (len(header) - 1)
+    marks = {"l": ":--", "r": "--:", "c": ":-:"}
+    lines = ["| " + " | ".join(map(str, header)) + " |", "|" + "|".join(marks[a] for a in align) + "|"]
+    lines += ["| " + " | ".join(map(str, row)) + " |" for row in body]
+    return "\n".join(lines) + "\n"
+
+
+def paired_columns(pc: PairedComparison, digits: int = 0) -> list[str]:
+    """Δ mean, ratio, p (t), p (Wilcoxon), share better, share tied."""
+    if np.isnan(pc.mean_diff):
+        return ["–"] * 6
+    ratio = "–" if np.isnan(pc.ratio) else f"{pc.ratio:.3f}"
+    return [f"{pc.mean_diff:+.{digits}f}", ratio, format_p(pc.p_t), format_p(pc.p_wilcoxon),
+            f"{100 * pc.better:.0f} %", f"{100 * pc.tied:.0f} %"]
+
+
+PAIRED_HEADER = ("Δ mean", "ratio", "p (t)", "p (Wilcoxon)", "beats", "ties")
+
+
+def write_csv(path: Path, rows: Sequence[Mapping[str, Any]], fields: Sequence[str] | None = None) -> None:
+    """Rows as CSV (columns: ``fields`` or the union of the rows' keys in first-seen order)."""
+    if fields is None:
+        fields = list(dict.fromkeys(k for r in rows for k in r))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=fields, lineterminator="\n")
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: _csv_value(row.get(k)) for k in fields})
+
+
+def _csv_value(value: Any) -> Any:
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return value
+
+
+def read_csv(path: Path) -> list[dict[str, Any]]:
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+# -- plots ---------------------------------------------------------------------------------------------------------
+def bar_and_differences(path: Path, cells: Mapping[str, Sequence[Mapping[str, Any]]], baseline: str | None,
+                        metric: str = "score", title: str = "") -> None:
+    """Left: mean ± sd bars per series. Right: per-seed paired differences against ``baseline`` (box + points)."""
+    labels = list(cells)
+    data = [values(cells[k], metric) for k in labels]
+    others = [k for k in labels if baseline in cells and k != baseline and seeds(cells[k]) == seeds(cells[baseline])]
+    fig, axes = plt.subplots(1, 2 if others else 1, figsize=(11 if others else 6, 4.2), squeeze=False)
+    ax = axes[0, 0]
+    means = [np.nanmean(x) if np.isfinite(x).any() else 0.0 for x in data]
+    sds = [np.nanstd(x, ddof=1) if np.isfinite(x).sum() > 1 else 0.0 for x in data]
+    ax.bar(range(len(labels)), means, yerr=sds, capsize=4, color="tab:blue", alpha=0.8)
+    ax.set_xticks(range(len(labels)), labels, rotation=30, ha="right")
+    ax.set_ylabel(f"{METRIC_LABELS.get(metric, metric)} (mean ± sd)")
+    ax.set_title(textwrap.fill(title or f"{METRIC_LABELS.get(metric, metric)}, {len(data[0])} seeds", 60), fontsize=9)
+    if others:
+        ax = axes[0, 1]
+        base = values(cells[baseline], metric)
+        diffs = [values(cells[k], metric) - base for k in others]
+        ax.axhline(0, color="grey", lw=0.8)
+        ax.boxplot(diffs, showfliers=False)
+        rng = np.random.default_rng(0)
+        for n, d in enumerate(diffs, start=1):
+            ax.scatter(n + rng.uniform(-0.15, 0.15, d.size), d, s=8, alpha=0.5, color="tab:orange")
+        ax.set_xticks(range(1, len(others) + 1), others, rotation=30, ha="right")
+        ax.set_ylabel(f"per-seed {METRIC_LABELS.get(metric, metric)} − {baseline}")
+        ax.set_title(f"paired differences vs {baseline}")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def sweep_plot(path: Path, xs: Sequence[Any], series: Mapping[str, Sequence[Sequence[Mapping[str, Any]]]],
+               metric: str, xlabel: str, title: str = "") -> None:
+    """Mean ± sd of ``metric`` against the sweep value, one line per series (categorical x if not numeric)."""
+    numeric = all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in xs)
+    pos = np.asarray(xs, dtype=float) if numeric else np.arange(len(xs), dtype=float)
+    fig, ax = plt.subplots(figsize=(8.0, 4.2))
+    width = 0.8 / max(1, len(series))
+    for k, (label, cells) in enumerate(series.items()):
+        stats_ = [values(c, metric) for c in cells]
+        mean = np.array([np.nanmean(s) if np.isfinite(s).any() else np.nan for s in stats_])
+        sd = np.array([np.nanstd(s, ddof=1) if np.isfinite(s).sum() > 1 else 0.0 for s in stats_])
+        if np.isnan(mean).all():
+            continue
+        if numeric:     # small offsets keep the error bars of overlapping series apart
+            step = np.min(np.diff(pos)) if len(pos) > 1 else 1.0
+            shift = (k - (len(series) - 1) / 2) * 0.04 * step
+            ax.errorbar(pos + shift, mean, yerr=sd, marker="o", ms=3, capsize=2, lw=1.2, label=label)
+        else:
+            ax.bar(pos + (k - (len(series) - 1) / 2) * width, mean, width, yerr=sd, capsize=2, label=label)
+    if not numeric:
+        ax.set_xticks(pos, [str(x) for x in xs], rotation=20, ha="right")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(f"{METRIC_LABELS.get(metric, metric)} (mean ± sd)")
+    ax.set_title(textwrap.fill(title, 70), fontsize=9)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
