@@ -1,0 +1,90 @@
+"""SB3 callbacks: episode metrics to TensorBoard, periodic evaluation against a scripted baseline, checkpoints."""
+
+from __future__ import annotations
+
+import csv
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+
+from policies.learned import LearnedPolicy
+from policies.registry import make_policy
+from training.heldout import evaluate, summarise, with_teammates
+
+EVAL_COLUMNS = ("timesteps", "wall_time", "score", "score_std", "valid_tasks", "rounds", "messages",
+                "baseline_score", "ratio")
+
+
+class EpisodeMetricsCallback(BaseCallback):
+    """Logs ``episode/<metric>`` means (score, valid tasks, conflicts, rounds, messages) of finished episodes."""
+
+    def _on_step(self) -> bool:
+        for info in self.locals.get("infos", ()):
+            metrics = info.get("episode_metrics")
+            if metrics:
+                for key, value in metrics.items():
+                    self.logger.record_mean(f"episode/{key}", float(value))
+        return True
+
+
+class PeriodicEvalCallback(BaseCallback):
+    """Every ``eval_freq`` steps: the deterministic policy on fixed seeds vs ``baseline`` on the same seeds.
+
+    Logs ``eval/score``, ``eval/baseline_score``, ``eval/ratio`` (and valid tasks, rounds, messages), appends a row
+    to ``csv_path`` and saves the best model so far to ``best_path``.
+    """
+
+    def __init__(self, env_kwargs: Mapping[str, Any], seeds: Sequence[int], eval_freq: int, csv_path: Path,
+                 best_path: Path | None = None, baseline: str = "cbgabi",
+                 scripted_agents: Mapping[str, str] | None = None, meta: Mapping[str, Any] | None = None,
+                 start_steps: int = 0) -> None:
+        super().__init__()
+        self.env_kwargs, self.seeds, self.eval_freq = dict(env_kwargs), list(seeds), eval_freq
+        self.csv_path, self.best_path, self.scripted_agents = Path(csv_path), best_path, dict(scripted_agents or {})
+        self.meta = dict(meta or {})
+        self.start_steps = start_steps
+        baseline_policy = with_teammates(make_policy(baseline), self.scripted_agents)
+        self.baseline_score = summarise(evaluate(baseline_policy, self.env_kwargs, self.seeds))["score"]
+        self.best = -np.inf
+        self._next = 0
+        self._t0 = time.perf_counter()
+
+    def _on_training_start(self) -> None:
+        self._t0 = time.perf_counter()
+        if not self.csv_path.exists():
+            self.csv_path.parent.mkdir(parents=True, exist_ok=True)
+            with open(self.csv_path, "w", newline="") as fh:
+                csv.writer(fh).writerow(EVAL_COLUMNS)
+        self._next = self.num_timesteps
+
+    def evaluate_now(self) -> dict[str, float]:
+        learned = LearnedPolicy(self.model.policy, self.meta, deterministic=True, name="current")
+        stats = summarise(evaluate(with_teammates(learned, self.scripted_agents), self.env_kwargs, self.seeds))
+        ratio = stats["score"] / self.baseline_score if self.baseline_score else float("nan")
+        steps = self.start_steps + self.num_timesteps
+        row = {"timesteps": steps, "wall_time": round(time.perf_counter() - self._t0, 2), **stats,
+               "baseline_score": self.baseline_score, "ratio": ratio}
+        with open(self.csv_path, "a", newline="") as fh:
+            csv.writer(fh).writerow([row[c] for c in EVAL_COLUMNS])
+        for key in ("score", "valid_tasks", "rounds", "messages"):
+            self.logger.record(f"eval/{key}", stats[key])
+        self.logger.record("eval/baseline_score", self.baseline_score)
+        self.logger.record("eval/ratio", ratio)
+        if stats["score"] > self.best:
+            self.best = stats["score"]
+            if self.best_path is not None:
+                self.model.save(self.best_path)
+        return row
+
+    def _on_step(self) -> bool:
+        if self.eval_freq > 0 and self.num_timesteps >= self._next:
+            self.evaluate_now()
+            self._next = self.num_timesteps + self.eval_freq
+        return True
+
+    def _on_training_end(self) -> None:
+        self.evaluate_now()

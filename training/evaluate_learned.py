@@ -1,0 +1,132 @@
+"""The table of ``docs/learning.md``: baselines, centralised solvers and learned checkpoints on held-out seeds.
+
+    python -m training.evaluate_learned                                   # print the table (seeds 10000..10099)
+    python -m training.evaluate_learned --update-doc docs/learning.md     # also rewrite the table in the doc
+
+Rows: random, CBGA, CBGABI (scripted, decentralised), SGAMA (centralised greedy), the exact optimum, and every
+``--learned LABEL=PATH`` checkpoint (default: the committed behaviour-cloning, PPO-from-scratch and BC + PPO
+models: ``models/train_small_bc/bc.zip``, ``models/train_small/model.zip``, ``models/train_small_bc/model.zip``).
+Each policy runs in an environment built with its ``env_overrides``; seed s is the same instance for
+every row (the instance is drawn at ``reset(seed=s)`` before any policy acts). Learned policies act greedily
+(arg-max of the masked logits).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from policies.exact import exact
+from policies.learned import LearnedPolicy
+from policies.registry import make_policy
+from policies.sgama import sgama
+from taskalloc_env.allocation import Allocation
+from taskalloc_env.env import TaskAllocEnv
+from training.heldout import TEST_SEEDS, evaluate
+
+DEFAULT_LEARNED = (
+    ("behaviour cloning (CBGABI)", "models/train_small_bc/bc.zip"),
+    ("PPO from scratch", "models/train_small/model.zip"),
+    ("BC + PPO", "models/train_small_bc/model.zip"),
+)
+SCRIPTED = (("random", "random"), ("CBGA", "cbga"), ("CBGABI", "cbgabi"))
+CENTRALISED = (("SGAMA (centralised greedy)", sgama), ("exact optimum", exact))
+BEGIN, END = "<!-- learning-table:begin -->", "<!-- learning-table:end -->"
+
+
+def centralised(solver: Any, scenario: str, seeds: Sequence[int]) -> list[Allocation]:
+    env = TaskAllocEnv(scenario)
+    out = []
+    for seed in seeds:
+        env.reset(seed=int(seed))
+        out.append(solver(env.scenario, env.config))
+    return out
+
+
+def run_rows(scenario: str, seeds: Sequence[int], learned: Sequence[tuple[str, str]]) -> list[dict[str, Any]]:
+    """One record per row: label, per-seed scores and mean figures, and the seconds it took."""
+    rows = []
+    jobs: list[tuple[str, Any]] = [(label, ("policy", make_policy(name))) for label, name in SCRIPTED]
+    jobs += [(label, ("solver", solver)) for label, solver in CENTRALISED]
+    jobs += [(label, ("policy", LearnedPolicy.load(path, name=label))) for label, path in learned]
+    for label, (kind, obj) in jobs:
+        t0 = time.perf_counter()
+        try:
+            allocations = evaluate(obj, {"scenario": scenario}, seeds) if kind == "policy" else \
+                centralised(obj, scenario, seeds)
+        except ValueError as exc:       # the exact solver refuses large instances; a learned MLP other sizes
+            print(f"{label}: skipped ({exc})", flush=True)
+            continue
+        rows.append({"label": label, "kind": kind, "seconds": round(time.perf_counter() - t0, 1),
+                     "scores": [a.score for a in allocations],
+                     "valid_tasks": float(np.mean([a.n_valid for a in allocations])),
+                     "rounds": float(np.mean([a.rounds for a in allocations])),
+                     "messages": float(np.mean([a.messages for a in allocations]))})
+        print(f"{label}: {np.mean(rows[-1]['scores']):.1f} ({rows[-1]['seconds']} s)", flush=True)
+    return rows
+
+
+def markdown(rows: Sequence[dict[str, Any]], seeds: Sequence[int]) -> str:
+    """Mean ± sd score, % of CBGABI and of the optimum, the paired difference to CBGABI, protocol figures."""
+    by_label = {r["label"]: np.asarray(r["scores"]) for r in rows}
+    ref = by_label["CBGABI"]
+    opt = by_label["exact optimum"].mean() if "exact optimum" in by_label else float("nan")
+    lines = [f"Held-out seeds {seeds[0]}–{seeds[-1]} ({len(seeds)} instances).", "",
+             "| policy | score (mean ± sd) | % of CBGABI | % of optimum | Δ vs CBGABI (paired, 95 % CI) "
+             "| seeds ≥ CBGABI | valid tasks | rounds | messages |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        s = by_label[r["label"]]
+        diff = s - ref
+        ci = 1.96 * diff.std(ddof=1) / np.sqrt(len(diff))
+        wins = float(np.mean(s >= ref - 1e-9))
+        protocol = f"{r['rounds']:.2f} | {r['messages']:.1f}" if r["kind"] == "policy" else "– | –"
+        of_opt = "–" if np.isnan(opt) else f"{100 * s.mean() / opt:.1f} %"
+        lines.append(f"| {r['label']} | {s.mean():.1f} ± {s.std(ddof=1):.1f} | {100 * s.mean() / ref.mean():.1f} % "
+                     f"| {of_opt} | {diff.mean():+.1f} ± {ci:.1f} | {100 * wins:.0f} % "
+                     f"| {r['valid_tasks']:.2f} | {protocol} |")
+    return "\n".join(lines)
+
+
+def update_doc(path: Path, table: str) -> None:
+    """Replace the text between the table markers of ``path``."""
+    text = path.read_text()
+    if BEGIN not in text or END not in text:
+        raise SystemExit(f"{path} has no {BEGIN} … {END} block to update")
+    block = f"{BEGIN}\n{table}\n{END}"
+    path.write_text(re.sub(re.escape(BEGIN) + ".*?" + re.escape(END), lambda _: block, text, flags=re.S))
+
+
+def main(argv: list[str] | None = None) -> str:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenario", default="train_small")
+    parser.add_argument("--seed-start", type=int, default=TEST_SEEDS.start)
+    parser.add_argument("--episodes", type=int, default=len(TEST_SEEDS))
+    parser.add_argument("--learned", action="append", metavar="LABEL=PATH",
+                        help="a checkpoint row (repeatable); default: the committed models")
+    parser.add_argument("--json", type=Path, help="also write per-seed scores here")
+    parser.add_argument("--update-doc", type=Path, help="rewrite the table block of this markdown file")
+    args = parser.parse_args(argv)
+    seeds = list(range(args.seed_start, args.seed_start + args.episodes))
+    learned = [tuple(item.split("=", 1)) for item in args.learned] if args.learned else \
+        [(label, path) for label, path in DEFAULT_LEARNED if Path(path).exists()]
+    rows = run_rows(args.scenario, seeds, learned)
+    table = markdown(rows, seeds)
+    print(table)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({"seeds": seeds, "rows": rows}, indent=1))
+    if args.update_doc:
+        update_doc(args.update_doc, table)
+    return table
+
+
+if __name__ == "__main__":
+    main()
