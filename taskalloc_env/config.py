@@ -240,6 +240,17 @@ def _as_tuple(name: str, value: Any) -> tuple:
     raise AssertionError  # unreachable
 
 
+def _check_record(name: str, entry: Any, keys: tuple[str, ...], required: str) -> None:
+    """A nested record (a ``task_mix`` entry, ``prerequisites``) is a mapping of known keys with ``required`` set."""
+    if not isinstance(entry, Mapping):
+        _fail(name, entry, f"a mapping with keys {', '.join(keys)}")
+    unknown = set(entry) - set(keys)
+    if unknown:
+        _fail(f"{name}.{sorted(unknown)[0]}", entry, f"keys {', '.join(keys)}")
+    if required not in entry:
+        _fail(f"{name}.{required}", entry, f"{required} is required")
+
+
 def _normalise(name: str, value: Any) -> Any:
     """Turn YAML/keyword values into the dataclass field types (lists → tuples, mappings → records)."""
     if name == "agents_per_task" and isinstance(value, (list, tuple)):
@@ -255,26 +266,14 @@ def _normalise(name: str, value: Any) -> Any:
             if isinstance(entry, TaskMix):
                 mixes.append(entry)
                 continue
-            if not isinstance(entry, Mapping):
-                _fail(name, entry, "a list of {count, agents, equipment} mappings")
-            unknown = set(entry) - {"count", "agents", "equipment"}
-            if unknown:
-                _fail(f"task_mix.{sorted(unknown)[0]}", entry, "keys count, agents, equipment")
-            if "count" not in entry:
-                _fail("task_mix.count", entry, "every task_mix entry needs a count")
+            _check_record(name, entry, ("count", "agents", "equipment"), required="count")
             equipment = tuple(entry.get("equipment", ()))  # "AB" and ["A", "B"] both name two items
             mixes.append(TaskMix(count=entry["count"], agents=entry.get("agents"), equipment=equipment))
         return tuple(mixes)
     if name == "prerequisites" and value is not None:
         if isinstance(value, PrerequisiteChains):
             return value
-        if not isinstance(value, Mapping):
-            _fail(name, value, "null or a mapping {chains, length, followup_window}")
-        unknown = set(value) - {"chains", "length", "followup_window"}
-        if unknown:
-            _fail(f"prerequisites.{sorted(unknown)[0]}", value, "keys chains, length, followup_window")
-        if "chains" not in value:
-            _fail("prerequisites.chains", value, "the number of chains is required")
+        _check_record(name, value, ("chains", "length", "followup_window"), required="chains")
         return PrerequisiteChains(**value)
     if name in ("speed", "reward", "time_discount", "distance_discount", "window", "duration", "comm_range") \
             and isinstance(value, int) and not isinstance(value, bool):
