@@ -224,7 +224,7 @@ class TaskAllocEnv(ParallelEnv):
                 raise InvalidActionError(message)
             for a in self.agents:
                 flags[a] = message
-        masks = self._builder.action_masks(self.protocol, self._passed)
+        masks = self._masks                     # the masks handed out with the last observations
         decisions = []
         for agent in self.agents:
             i = self.agent_index[agent]
@@ -272,8 +272,8 @@ class TaskAllocEnv(ParallelEnv):
     # -- outputs ---------------------------------------------------------------------------------------------------
     def _observations(self) -> dict[str, dict[str, np.ndarray]]:
         obs = self._builder.build(self.protocol, self._passed)
-        masks = self._builder.action_masks(self.protocol, self._passed)
-        return {a: {"observation": obs[self.agent_index[a]], "action_mask": masks[self.agent_index[a]]}
+        self._masks = self._builder.action_masks(self.protocol, self._passed)
+        return {a: {"observation": obs[self.agent_index[a]], "action_mask": self._masks[self.agent_index[a]].copy()}
                 for a in self.agents}
 
     def _infos(self, flags: dict[str, str]) -> dict[str, dict[str, Any]]:
