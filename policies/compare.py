@@ -45,8 +45,10 @@ COLUMNS = (("score", "score"), ("valid_tasks", "valid tasks"), ("rounds", "round
 
 
 def learned_checkpoints(root: Path = ROOT / "models") -> list[Path]:
-    """Committed checkpoints: ``models/<run>/model.zip``, in name order."""
-    return sorted(root.glob("*/model.zip")) if root.is_dir() else []
+    """Committed checkpoints: ``models/<run>/model.zip``, in name order (relative to the repository when inside it,
+    so result files do not depend on where the checkout lives)."""
+    found = sorted(root.glob("*/model.zip")) if root.is_dir() else []
+    return [p.relative_to(ROOT) if p.is_relative_to(ROOT) else p for p in found]
 
 
 def usable_learned(path: Path, cfg: TaskAllocConfig) -> tuple[str | None, str]:

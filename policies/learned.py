@@ -21,6 +21,8 @@ import numpy as np
 
 from policies.base import Policy
 
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
 # config fields that describe the consensus protocol rather than the scenario (taskalloc_env.config docstring)
 PROTOCOL_FIELDS = ("cbba_table", "prereq_mode", "release_order", "task_quitting", "delta", "reset_on", "quit_block",
                    "require_known_capacity", "consensus", "max_bundle", "max_rounds")
@@ -46,6 +48,8 @@ class LearnedPolicy(Policy):
         from stable_baselines3.common.save_util import load_from_zip_file
 
         path = Path(path)
+        if not path.is_absolute() and not path.exists() and (REPO_ROOT / path).exists():
+            path = REPO_ROOT / path           # committed checkpoints are named relative to the repository
         if path.is_dir():
             path = path / "model.zip"
         if not path.exists():
