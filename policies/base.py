@@ -7,6 +7,7 @@ environment (e.g. ``task_quitting`` for CBGA with task quitting); runners build 
 
 from __future__ import annotations
 
+import abc
 from collections.abc import Mapping
 from typing import Any
 
@@ -16,7 +17,7 @@ from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.observation import ObservationLayout
 
 
-class Policy:
+class Policy(abc.ABC):
     """Base class: subclasses implement ``act`` and may override ``start`` and ``env_overrides``."""
 
     name: str = "policy"
@@ -56,9 +57,10 @@ class Policy:
     def n_tasks(self) -> int:
         return self.env.config.n_tasks
 
+    @abc.abstractmethod
     def act(self, observations: Mapping[str, Mapping[str, np.ndarray]],
             infos: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, int]:
-        raise NotImplementedError
+        """The action of every agent in ``observations`` (agent name → action index)."""
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r})"
