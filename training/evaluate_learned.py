@@ -23,13 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from policies.exact import exact
-from policies.learned import LearnedPolicy
-from policies.registry import make_policy
-from policies.sgama import sgama
-from taskalloc_env.allocation import Allocation
-from taskalloc_env.env import TaskAllocEnv
-from training.heldout import TEST_SEEDS, evaluate
+from taskalloc_env.config import resolve_config
+from training.evaluation import Episode, run_episode, skip_reason
+from training.heldout import TEST_SEEDS
 
 DEFAULT_LEARNED = (
     ("behaviour cloning (CBGABI)", "models/train_small_bc/bc.zip"),
@@ -37,38 +33,33 @@ DEFAULT_LEARNED = (
     ("BC + PPO", "models/train_small_bc/model.zip"),
 )
 SCRIPTED = (("random", "random"), ("CBGA", "cbga"), ("CBGABI", "cbgabi"))
-CENTRALISED = (("SGAMA (centralised greedy)", sgama), ("exact optimum", exact))
+CENTRALISED = (("SGAMA (centralised greedy)", "sgama"), ("exact optimum", "exact"))
 BEGIN, END = "<!-- learning-table:begin -->", "<!-- learning-table:end -->"
 
 
-def centralised(solver: Any, scenario: str, seeds: Sequence[int]) -> list[Allocation]:
-    env = TaskAllocEnv(scenario)
-    out = []
-    for seed in seeds:
-        env.reset(seed=int(seed))
-        out.append(solver(env.scenario, env.config))
-    return out
-
-
 def run_rows(scenario: str, seeds: Sequence[int], learned: Sequence[tuple[str, str]]) -> list[dict[str, Any]]:
-    """One record per row: label, per-seed scores and mean figures, and the seconds it took."""
+    """One record per row: label, per-seed scores and mean figures, and the seconds it took.
+
+    Each episode goes through ``training.evaluation.run_episode``, the experiment runner's paired evaluation."""
+    cfg = resolve_config(scenario)
+    solvers = [(label, name, "policy") for label, name in SCRIPTED]
+    solvers += [(label, name, "solver") for label, name in CENTRALISED]
+    solvers += [(label, f"learned:{path}", "policy") for label, path in learned]
     rows = []
-    jobs: list[tuple[str, Any]] = [(label, ("policy", make_policy(name))) for label, name in SCRIPTED]
-    jobs += [(label, ("solver", solver)) for label, solver in CENTRALISED]
-    jobs += [(label, ("policy", LearnedPolicy.load(path, name=label))) for label, path in learned]
-    for label, (kind, obj) in jobs:
+    for label, solver, kind in solvers:
         t0 = time.perf_counter()
+        reason = skip_reason(solver, cfg)
         try:
-            allocations = evaluate(obj, {"scenario": scenario}, seeds) if kind == "policy" else \
-                centralised(obj, scenario, seeds)
+            if reason:
+                raise ValueError(reason)
+            episodes = [run_episode(Episode(solver, cfg, int(seed))) for seed in seeds]
         except ValueError as exc:       # the exact solver refuses large instances; a learned MLP other sizes
             print(f"{label}: skipped ({exc})", flush=True)
             continue
         rows.append({"label": label, "kind": kind, "seconds": round(time.perf_counter() - t0, 1),
-                     "scores": [a.score for a in allocations],
-                     "valid_tasks": float(np.mean([a.n_valid for a in allocations])),
-                     "rounds": float(np.mean([a.rounds for a in allocations])),
-                     "messages": float(np.mean([a.messages for a in allocations]))})
+                     "scores": [e["score"] for e in episodes],
+                     **{m: float(np.mean([e[m] or 0 for e in episodes])) for m in ("valid_tasks", "rounds",
+                                                                                    "messages")}})
         print(f"{label}: {np.mean(rows[-1]['scores']):.1f} ({rows[-1]['seconds']} s)", flush=True)
     return rows
 
