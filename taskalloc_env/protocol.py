@@ -78,6 +78,7 @@ class Protocol:
         self._slot = np.full((s.n_agents, s.n_tasks), -1, dtype=np.int64)
         self._dirty = set(range(s.n_agents))
         self._view: BidView | None = None
+        self._quits: np.ndarray | None = None
         self._score: TeamScore | None = None
         self._last_bids = self.knowledge.bids.copy()
         self._last_bundles: list[list[int]] = [[] for _ in range(s.n_agents)]
@@ -87,6 +88,7 @@ class Protocol:
         if agent is not None:
             self._dirty.add(agent)
         self._view = None
+        self._quits = None
         self._score = None
 
     def _refresh_paths(self) -> None:
@@ -125,14 +127,16 @@ class Protocol:
 
     # -- Phase 1 decisions ---------------------------------------------------------------------------------------
     def quit_options(self) -> np.ndarray:
-        """(N, M) quits the protocol allows now (spec cbga §5.3 conditions 1–4 and 6)."""
-        kn = self.knowledge
-        if not self.cfg.task_quitting:
-            return np.zeros(kn.quit.shape, dtype=bool)
-        counts = kn.member_counts()
-        return ((self.scenario.task_agents > 1)[None, :] & (kn.own_bids() > 0) & ~kn.quit
-                & (counts < self.scenario.task_agents[None, :])
-                & (self.round - kn.assigned_at > self.cfg.delta))
+        """(N, M) quits the protocol allows now (spec cbga §5.3 conditions 1–4 and 6; cached until the next change)."""
+        if self._quits is None:
+            kn = self.knowledge
+            if not self.cfg.task_quitting:
+                self._quits = np.zeros(kn.quit.shape, dtype=bool)
+            else:
+                self._quits = ((self.scenario.task_agents > 1)[None, :] & (kn.own_bids() > 0) & ~kn.quit
+                               & (kn.member_counts() < self.scenario.task_agents[None, :])
+                               & (self.round - kn.assigned_at > self.cfg.delta))
+        return self._quits
 
     def bid(self, agent: int, task: int, view: BidView | None = None) -> float:
         """Agent ``agent`` bids c_ij on ``task`` at its best slot (Alg 5 lines 21–26); returns the bid.
