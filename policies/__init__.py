@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 from policies.base import Policy
-from policies.exact import exact
+from policies.centralised import exact, sgama
 from policies.registry import POLICY_NAMES, make_policy
 from policies.rollout import rollout
 from policies.scripted import CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
-from policies.sgama import sgama
 
 __all__ = [
     "POLICY_NAMES",

@@ -1,24 +1,12 @@
-"""Command line of the policies package: ``python -m policies compare [--scenario NAME] [--episodes N] [--out DIR]``.
+"""``python -m policies compare …``: the comparison command under its first name (it lives in ``evaluation``).
 
-See ``policies.compare`` for what the comparison runs and writes.
+A command entry point, not a module of the library: nothing imports it, so it may reach the evaluation layer above
+``policies`` without making the packages depend on each other.
 """
 
 from __future__ import annotations
 
-import argparse
-from collections.abc import Sequence
-
-from policies import compare
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m policies", description="Compare task-allocation policies.")
-    sub = parser.add_subparsers(dest="command", required=True)
-    compare.add_arguments(sub.add_parser("compare", help="every baseline on the same seeds of a scenario",
-                                         description=compare.__doc__.split("\n\n")[0]))
-    args = parser.parse_args(argv)
-    return compare.run(args)
-
+from evaluation.__main__ import main
 
 if __name__ == "__main__":
     raise SystemExit(main())

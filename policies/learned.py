@@ -1,10 +1,10 @@
 """A trained bidding policy behind the same ``Policy`` interface as the scripted baselines.
 
-``LearnedPolicy.load(path)`` reads a checkpoint written by ``python -m training.train`` (an SB3 ``.zip``, or a run
-directory holding ``model.zip``) and rebuilds only its torch policy, so PPO, MaskablePPO and behaviour-cloned
-checkpoints all load the same way. Every agent acts from its own observation with the shared weights (parameter
-sharing); the action is greedy (``deterministic=True``: the most likely kind of action — pass, bid or quit — then
-the most likely action of that kind, see ``greedy_actions``) or a sample. The pooling network
+``LearnedPolicy.load(source)`` reads a checkpoint (``policies.checkpoint``: JSON architecture + safetensors
+weights, nothing executable): a committed model by name (``train_small``, from ``models/``), a checkpoint's
+``.json`` or stem, or a run folder holding ``model.json``. Every agent acts from its own observation with the shared
+weights (parameter sharing); the action is greedy (``deterministic=True``: the most likely kind of action — pass,
+bid or quit — then the most likely action of that kind, see ``greedy_actions``) or a sample. The pooling network
 has no weight tied to the number of tasks, so a checkpoint trained on ``train_small`` also runs on larger scenarios.
 
 ``env_overrides`` are the protocol options the policy was trained with (e.g. ``task_quitting=True, delta=1`` so it
@@ -20,78 +20,75 @@ from typing import Any
 import numpy as np
 
 from policies.base import Policy
+from policies.checkpoint import Checkpoint, CheckpointError, load
+from taskalloc_env import resources
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
 
-# config fields that describe the consensus protocol rather than the scenario (taskalloc_env.config docstring)
-PROTOCOL_FIELDS = ("cbba_table", "prereq_mode", "release_order", "task_quitting", "delta", "reset_on", "quit_block",
-                   "require_known_capacity", "consensus", "max_bundle", "max_rounds")
+def resolve(source: str | Path) -> Any:
+    """A committed model's name (``train_small``) → its ``model.json``; anything else is a path."""
+    if isinstance(source, str) and resources.is_name(source) and not Path(source).exists():
+        try:
+            return resources.named("models", source, suffix="") / "model.json"
+        except ValueError as exc:
+            raise CheckpointError(f"{exc}. Committed models ship with the package; a model you trained is loaded "
+                                  "by its path (learned:runs/NAME)") from None
+    return Path(source)
 
 
 class LearnedPolicy(Policy):
-    """Acts with a trained SB3 actor-critic policy (``training.network``) for every agent it is given."""
+    """Acts with a trained actor network (``policies.networks``) for every agent it is given."""
 
-    def __init__(self, policy: Any, meta: Mapping[str, Any] | None = None, deterministic: bool = True,
-                 name: str = "learned") -> None:
+    def __init__(self, actor: Any, own_features: tuple[str, ...], task_features: tuple[str, ...],
+                 env_overrides: Mapping[str, Any] | None = None, meta: Mapping[str, Any] | None = None,
+                 deterministic: bool = True, name: str = "learned") -> None:
         super().__init__()
-        self.policy = policy
+        self.actor = actor
+        self.own_features, self.task_features = tuple(own_features), tuple(task_features)
+        self._env_overrides = dict(env_overrides or {})
         self.meta = dict(meta or {})
         self.deterministic = deterministic
         self.name = name
         self.rng = np.random.default_rng()
 
     @classmethod
-    def load(cls, path: str | Path, deterministic: bool = True, device: str = "cpu",
-             name: str | None = None) -> LearnedPolicy:
-        """Load ``path`` (a ``.zip`` checkpoint, or a directory with ``model.zip``)."""
-        import torch as th
-        from stable_baselines3.common.save_util import load_from_zip_file
+    def from_checkpoint(cls, checkpoint: Checkpoint, deterministic: bool = True, name: str = "learned"
+                        ) -> LearnedPolicy:
+        return cls(checkpoint.actor, checkpoint.own_features, checkpoint.task_features, checkpoint.env_overrides,
+                   checkpoint.meta, deterministic=deterministic, name=name)
 
-        path = Path(path)
-        if not path.is_absolute() and not path.exists() and (REPO_ROOT / path).exists():
-            path = REPO_ROOT / path           # committed checkpoints are named relative to the repository
-        if path.is_dir():
-            path = path / "model.zip"
-        if not path.exists():
-            raise FileNotFoundError(f"no checkpoint at {str(path)!r}; train one with `python -m training.train`")
-        data, params, _ = load_from_zip_file(path, device=device)
-        policy = data["policy_class"](data["observation_space"], data["action_space"], lambda _: 0.0,
-                                      **data.get("policy_kwargs", {}))
-        policy.load_state_dict(params["policy"])
-        policy.to(th.device(device))
-        policy.set_training_mode(False)
-        return cls(policy, data.get("taskalloc", {}), deterministic=deterministic, name=name or f"learned:{path}")
+    @classmethod
+    def load(cls, source: str | Path, deterministic: bool = True, name: str | None = None,
+             allow_pickle: bool = False) -> LearnedPolicy:
+        """Load a committed model by name, or a checkpoint by path (see the module docstring)."""
+        return cls.from_checkpoint(load(resolve(source), allow_pickle=allow_pickle), deterministic=deterministic,
+                                   name=name or f"learned:{source}")
 
     @property
     def env_overrides(self) -> dict[str, Any]:
-        overrides = self.meta.get("env_overrides", {})
-        return {k: v for k, v in overrides.items() if k in PROTOCOL_FIELDS}
+        return dict(self._env_overrides)
 
     def start(self, env: Any, seed: int | None = None) -> None:
         super().start(env, seed)
-        body = self.policy.mlp_extractor
         layout = self.layout
-        if hasattr(body, "own_size"):   # pooling network: any number of tasks, same per-task and own features
-            fits = (body.own_size, body.task_size) == (layout.own_size, layout.task_size)
-            need = f"own_size={body.own_size}, task_size={body.task_size}"
-        else:
-            fits = body.obs_size == layout.size
-            need = f"observations of size {body.obs_size} (a plain MLP is tied to the number of tasks)"
-        if not fits:
-            raise ValueError(f"{self.name} needs {need}; this environment has own_size={layout.own_size}, "
-                             f"task_size={layout.task_size}, size={layout.size}")
+        if (self.own_features, self.task_features) != (layout.own_names, layout.task_names):
+            raise ValueError(f"{self.name} was trained on other observation features: own {self.own_features}, "
+                             f"per task {self.task_features}; this environment has own {layout.own_names}, per task "
+                             f"{layout.task_names}")
+        if not self.actor.fits(layout.own_size, layout.task_size, layout.n_tasks):
+            raise ValueError(f"{self.name} ({type(self.actor).__name__} {self.actor.config()}) does not fit "
+                             f"{layout.n_tasks} tasks (a plain MLP is tied to the number of tasks it was trained on)")
         self.rng = np.random.default_rng(seed)
 
     def act(self, observations: Mapping[str, Mapping[str, np.ndarray]],
             infos: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, int]:
-        from training.network import masked_logits
+        from policies.networks import masked_logits
 
         if not observations:
             return {}
         agents = list(observations)
         obs = np.stack([observations[a]["observation"] for a in agents])
         masks = np.stack([observations[a]["action_mask"] for a in agents])
-        logits = masked_logits(self.policy, obs, masks).cpu().numpy().astype(np.float64)
+        logits = masked_logits(self.actor, obs, masks).cpu().numpy().astype(np.float64)
         logits[masks == 0] = -np.inf
         probs = np.exp(logits - logits.max(axis=1, keepdims=True))
         probs /= probs.sum(axis=1, keepdims=True)

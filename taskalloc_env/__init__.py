@@ -9,8 +9,9 @@ from __future__ import annotations
 import pettingzoo
 
 from taskalloc_env.allocation import Allocation
-from taskalloc_env.config import ConfigError, TaskAllocConfig, load_config, resolve_config
-from taskalloc_env.env import InvalidActionError, TaskAllocEnv
+from taskalloc_env.config import TaskAllocConfig, load_config, resolve_config
+from taskalloc_env.env import TaskAllocEnv
+from taskalloc_env.errors import ConfigError, InvalidActionError
 from taskalloc_env.observation import ObservationLayout
 from taskalloc_env.scenario import Agent, Scenario, Task, generate
 

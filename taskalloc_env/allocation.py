@@ -75,6 +75,3 @@ class Allocation:
             "converged": self.converged,
             "agreement": self.agreement,
         }
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)

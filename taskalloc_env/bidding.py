@@ -17,7 +17,7 @@ import dataclasses
 import numpy as np
 
 from taskalloc_env.cbba_table import NONE, outbids
-from taskalloc_env.group_merge import Equipment
+from taskalloc_env.groups import Equipment, admit
 from taskalloc_env.knowledge import NEVER, LocalKnowledge
 from taskalloc_env.scenario import Scenario
 
@@ -70,22 +70,18 @@ def prerequisites_met(scenario: Scenario, mode: str, counts: np.ndarray,
     return ((counts > 0).astype(np.int64) @ lacking > 0) | ~has_prereqs
 
 
-def complete_groups(bids: np.ndarray, scenario: Scenario) -> np.ndarray:
+def complete_groups(bids: np.ndarray, scenario: Scenario, equipment: Equipment) -> np.ndarray:
     """(H, M) column j of table h has L_j members whose equipment covers te_j."""
-    full = (bids > 0).sum(axis=1) == scenario.task_agents[None, :]
-    if not scenario.has_equipment:
-        return full
-    have = np.einsum("ikm,ke->ime", (bids > 0).astype(np.int64),
-                     scenario.agent_equipment.astype(np.int64))
-    return full & np.all(have >= scenario.task_equipment[None, :, :], axis=2)
+    members = bids > 0
+    return (members.sum(axis=1) == scenario.task_agents[None, :]) & equipment.covers(members)
 
 
-def known_capacity(knowledge: LocalKnowledge, scenario: Scenario, equipment_match: np.ndarray) -> np.ndarray:
+def known_capacity(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment,
+                   equipment_match: np.ndarray) -> np.ndarray:
     """(N, M) i knows at least L_j agents (itself included) that can jointly cover te_j (spec cbga §3.3 filter 4)."""
     known = knowledge.known.astype(np.int64)
     enough = known @ equipment_match.astype(np.int64) >= scenario.task_agents[None, :]
-    have = known @ scenario.agent_equipment.astype(np.int64)                       # (N, E)
-    covered = np.all(have[:, None, :] >= scenario.task_equipment[None, :, :], axis=2)
+    covered = equipment.covers(np.broadcast_to(knowledge.known[:, :, None], (*known.shape, scenario.n_tasks)))
     return (enough & covered) | ~scenario.multi_agent[None, :]
 
 
@@ -127,21 +123,16 @@ def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment
         group_total[:, multi] = columns.sum(axis=1)
         lowest_bid[:, multi] = np.where(counts[:, multi] > 0, np.where(members, columns, np.inf).min(axis=1), 0.0)
         newcomer = np.broadcast_to(agents[:, None], (n, int(multi.sum())))
-        eq = equipment.subset(multi)
-        room = (counts[:, multi] < scenario.task_agents[None, multi]) & eq.slot_open(members, newcomer)
-        victims = eq.replaceable(members, newcomer)
-        lowest = np.argmin(np.where(victims, columns, np.inf), axis=1)
-        low_bid = np.take_along_axis(columns, lowest[:, None, :], axis=1)[:, 0, :]
-        beats = victims.any(axis=1) & outbids(gain[:, multi], agents[:, None], low_bid, lowest)
-        outbid[:, multi] = room | beats
-        displaced[:, multi] = np.where(~room & beats, lowest, NONE)
-        displaced_bid[:, multi] = np.where(~room & beats, low_bid, 0.0)
+        admission = admit(columns, newcomer, gain[:, multi], scenario.task_agents[multi], equipment.subset(multi))
+        outbid[:, multi] = admission.accepted
+        displaced[:, multi] = admission.displaced
+        displaced_bid[:, multi] = admission.displaced_bid
 
-    complete = complete_groups(bids, scenario) if prereq_mode == "all_complete" else None
+    complete = complete_groups(bids, scenario, equipment) if prereq_mode == "all_complete" else None
     prereqs_met = prerequisites_met(scenario, prereq_mode, counts, complete)
     eligible = equipment_match & prereqs_met & ~in_bundle & fillable[None, :]
     if require_known_capacity:
-        eligible &= known_capacity(knowledge, scenario, equipment_match)
+        eligible &= known_capacity(knowledge, scenario, equipment, equipment_match)
     eligible &= knowledge.quit_members == NEVER
     bundle_sizes = np.array([len(b) for b in knowledge.bundles])
     eligible &= (bundle_sizes < max_bundle)[:, None]

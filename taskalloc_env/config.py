@@ -25,11 +25,10 @@ from typing import Any
 
 import yaml
 
-SCENARIO_DIR = Path(__file__).resolve().parent.parent / "configs" / "scenarios"
+from taskalloc_env import resources
+from taskalloc_env.errors import ConfigError
 
-
-class ConfigError(ValueError):
-    """A configuration field has a bad value or an unknown name."""
+MAX_FILE_BYTES = 1 << 20       # config files are a few hundred bytes; anything beyond 1 MiB is refused unread
 
 
 # Allowed values of every named option (spec cbga §11, plus ``marginal_gain`` and ``consensus``).
@@ -316,27 +315,55 @@ def type_counts(cfg: TaskAllocConfig) -> tuple[int, ...]:
     return tuple(base + (1 if i < extra else 0) for i in range(len(types)))
 
 
-def resolve_scenario_path(name: str | Path) -> Path:
-    """A scenario name (``default``) or a path to a YAML file."""
-    path = Path(name)
-    if path.suffix in (".yaml", ".yml"):
+def read_yaml(source: Path | resources.Traversable, what: str = "config file") -> Any:
+    """Parse a YAML file; every way it can fail becomes one ``ConfigError`` naming the file (and the line)."""
+    try:
+        if source.is_dir():
+            raise ConfigError(f"{what} {str(source)!r} is a folder, not a YAML file")
+        data = source.read_bytes()
+    except OSError as exc:
+        raise ConfigError(f"{what} {str(source)!r} cannot be read: {exc.strerror or exc}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise ConfigError(f"{what} {str(source)!r} is {len(data)} bytes; config files are limited to {MAX_FILE_BYTES}")
+    try:
+        return yaml.safe_load(data.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{what} {str(source)!r} is not UTF-8 text (byte {exc.start})") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1}, column {mark.column + 1}:" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ConfigError(f"{what} {str(source)!r} is not valid YAML:{where} {problem}") from None
+    except RecursionError:
+        raise ConfigError(f"{what} {str(source)!r} nests too deeply to be a config file") from None
+
+
+def scenario_source(scenario: str | Path) -> Path | resources.Traversable:
+    """A scenario name (``default``: a file of ``configs/scenarios``) or a path to a YAML file.
+
+    A ``Path``, or a string with a folder or a ``.yaml``/``.yml`` suffix, is a path; any other string must be a
+    bare name, so a name can never reach a file outside the scenario folder.
+    """
+    if isinstance(scenario, Path) or (isinstance(scenario, str) and not resources.is_name(scenario)
+                                      and Path(scenario).suffix in (".yaml", ".yml")):
+        path = Path(scenario)
         if not path.exists():
             raise ConfigError(f"scenario file {str(path)!r} does not exist")
         return path
-    candidate = SCENARIO_DIR / f"{name}.yaml"
-    if not candidate.exists():
-        names = sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
-        raise ConfigError(f"unknown scenario {str(name)!r}; known scenarios: {names}, or a path to a .yaml file")
-    return candidate
+    if not isinstance(scenario, str):
+        raise ConfigError(f"scenario: got {scenario!r} ({type(scenario).__name__}); allowed: a scenario name, a path "
+                          "to a .yaml file, a TaskAllocConfig, a mapping of config fields, or a Scenario")
+    return resources.named("scenarios", scenario)
 
 
 def load_config(name: str | Path = "default", **overrides: Any) -> TaskAllocConfig:
     """Read a scenario YAML (by name from ``configs/scenarios`` or by path) and apply keyword overrides."""
-    path = resolve_scenario_path(name)
-    with open(path) as fh:
-        data = yaml.safe_load(fh) or {}
+    source = scenario_source(name)
+    data = read_yaml(source, "scenario file")
+    if data is None:
+        data = {}
     if not isinstance(data, Mapping):
-        raise ConfigError(f"scenario file {str(path)!r} must hold a mapping of config fields, "
+        raise ConfigError(f"scenario file {str(source)!r} must hold a mapping of config fields, "
                           f"got {type(data).__name__}")
     return from_mapping({**data, **overrides})
 

@@ -10,8 +10,7 @@ The receivers at the same inbox position are processed in one vectorised call, w
 sequential per-receiver semantics because receivers never read each other's tables within a round.
 
 Accounting (spec cbga §2.2, §6.2): one message = one (sender, receiver) pair = one communication step; a message
-holds 3·u + N_n data items (u = positive entries of the sender's table); ``data_items_dense`` counts the old
-formats (CBBA vectors 2N_m + N_n when every L_j = 1, otherwise the x and y matrices 2N_mN_n + N_n).
+holds 3·u + N_n data items (u = positive entries of the sender's table).
 """
 
 from __future__ import annotations
@@ -21,27 +20,26 @@ import dataclasses
 import numpy as np
 
 from taskalloc_env.cbba_table import NONE, RESET, UPDATE, decide
-from taskalloc_env.group_merge import Equipment, merge
+from taskalloc_env.group_merge import merge
+from taskalloc_env.groups import Equipment
 from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.network import CommGraph
 
 
 @dataclasses.dataclass(frozen=True)
 class Traffic:
-    """What one round sent: totals and per receiving agent."""
+    """What one round sent, in totals."""
 
     messages: int
     informative: int               # messages that changed the receiver's table
     data_items: int
-    data_items_dense: int
-    received: np.ndarray           # (N,) messages received per agent
 
 
 def exchange(knowledge: LocalKnowledge, graph: CommGraph, now: int, required_agents: np.ndarray,
              equipment: Equipment, table: str = "canonical") -> Traffic:
     """Run one round of Phase 2 on every agent's table in place; returns the round's traffic."""
     kn = knowledge
-    n, _, m = kn.bids.shape
+    n = kn.bids.shape[0]
     agents = np.arange(n)
     kn.timestamps[agents, agents] = now
     sent_bids = kn.bids.copy()
@@ -92,6 +90,4 @@ def exchange(knowledge: LocalKnowledge, graph: CommGraph, now: int, required_age
     messages = int(graph.degree.sum())
     positive = (sent_bids > 0).sum(axis=(1, 2))
     items = int((graph.degree * (3 * positive + n)).sum())
-    dense_size = 2 * m + n if kn.single.all() else 2 * m * n + n
-    return Traffic(messages=messages, informative=int(informative.sum()), data_items=items,
-                   data_items_dense=messages * dense_size, received=graph.degree.copy())
+    return Traffic(messages=messages, informative=int(informative.sum()), data_items=items)

@@ -49,6 +49,7 @@ from pettingzoo import ParallelEnv
 
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import TaskAllocConfig, max_required_agents, resolve_config, round_bound
+from taskalloc_env.errors import InvalidActionError
 from taskalloc_env.observation import ObservationBuilder, state_vector
 from taskalloc_env.protocol import Protocol
 from taskalloc_env.render import ansi_table, figure, rgb_array
@@ -56,10 +57,6 @@ from taskalloc_env.scenario import Scenario, generate
 
 PASS = 0
 INVALID_ACTION_MODES = ("raise", "noop")
-
-
-class InvalidActionError(ValueError):
-    """An action outside the mask, a missing or unknown agent, or a step after the episode ended."""
 
 
 class TaskAllocEnv(ParallelEnv):
@@ -110,6 +107,7 @@ class TaskAllocEnv(ParallelEnv):
             self._max_rounds = probe_protocol.max_rounds
         else:
             self._max_agents_per_task = max_required_agents(self.config)
+            # the largest diameter any instance can have: 1 fully connected, n − 1 for agents in a line
             diameter = 1 if self.config.comm_range is None else max(1, n - 1)
             self._max_rounds = self.config.max_rounds or round_bound(m, n, self._max_agents_per_task, diameter)
         builder = ObservationBuilder(probe_protocol, self._max_agents_per_task, self._max_rounds)

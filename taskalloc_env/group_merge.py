@@ -15,37 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from taskalloc_env.cbba_table import outbids
-
-
-class Equipment:
-    """Equipment arrays the merge and the outbid test share (spec cbga §1.4, §3.4)."""
-
-    def __init__(self, agent_equipment: np.ndarray, task_equipment: np.ndarray) -> None:
-        self.agent = agent_equipment.astype(bool)                 # (N, E) ae_i
-        self.required = task_equipment.astype(np.int64)           # (M, E) te_j as counts
-        self.restricted = self.required.any(axis=1)               # (M,) te_j ≠ ∅
-        self.any = bool(self.restricted.any())
-
-    def subset(self, tasks: np.ndarray) -> Equipment:
-        return Equipment(self.agent, self.required[tasks])
-
-    def slot_open(self, members: np.ndarray, newcomer: np.ndarray) -> np.ndarray:
-        """(R, M): the newcomer's equipment meets an unmet item of te_j given the (R, N, M) members."""
-        if not self.any:
-            return np.ones(newcomer.shape, dtype=bool)
-        have = np.einsum("rnm,ne->rme", members.astype(np.int64), self.agent.astype(np.int64))
-        unmet = self.required[None, :, :] > have                   # (R, M, E)
-        fills = np.any(unmet & self.agent[newcomer], axis=2)
-        return fills | ~self.restricted[None, :]
-
-    def replaceable(self, members: np.ndarray, newcomer: np.ndarray) -> np.ndarray:
-        """(R, N, M): members n the newcomer may displace: any member if te_j = ∅, else ae_n ∩ ae_m ∩ te_j ≠ ∅."""
-        if not self.any:
-            return members
-        needed = self.agent[newcomer] & (self.required > 0)[None, :, :]               # (R, M, E)
-        same = np.einsum("ne,rme->rnm", self.agent.astype(np.int64), needed.astype(np.int64)) > 0
-        return members & (same | ~self.restricted[None, None, :])
+from taskalloc_env.cbba_table import NONE
+from taskalloc_env.groups import Equipment, admit
 
 
 def merge(bids_i: np.ndarray, bids_k: np.ndarray, receiver: np.ndarray, sender: np.ndarray, s_i: np.ndarray,
@@ -69,17 +40,10 @@ def merge(bids_i: np.ndarray, bids_k: np.ndarray, receiver: np.ndarray, sender: 
         keyed = np.where(candidates, bids_k, -np.inf)
         newcomer = n_agents - 1 - np.argmax(keyed[:, ::-1, :], axis=1)             # best bid, ties: higher id
         bid = bids_k[rows, newcomer, cols]
-        members = out > 0
-        room = (members.sum(axis=1) < required_agents[None, :]) & equipment.slot_open(members, newcomer)
-        victims = equipment.replaceable(members, newcomer)
-        lowest = np.argmin(np.where(victims, out, np.inf), axis=1)                  # (bid, id)-minimum
-        low_bid = out[rows, lowest, cols]
-        replace = ~room & victims.any(axis=1) & outbids(bid, newcomer, low_bid, lowest)
-        take = active & (room | replace)
-        evict = active & replace
-        r_idx, j_idx = np.nonzero(evict)
-        out[r_idx, lowest[r_idx, j_idx], j_idx] = 0.0
-        r_idx, j_idx = np.nonzero(take)
+        admission = admit(out, newcomer, bid, required_agents, equipment)
+        r_idx, j_idx = np.nonzero(active & (admission.displaced != NONE))
+        out[r_idx, admission.displaced[r_idx, j_idx], j_idx] = 0.0
+        r_idx, j_idx = np.nonzero(active & admission.accepted)
         out[r_idx, newcomer[r_idx, j_idx], j_idx] = bid[r_idx, j_idx]
         r_idx, j_idx = np.nonzero(active)
         candidates[r_idx, newcomer[r_idx, j_idx], j_idx] = False

@@ -14,6 +14,7 @@ import numpy as np
 from gymnasium import spaces
 
 from taskalloc_env.protocol import Protocol
+from taskalloc_env.scenario import Scenario
 
 OWN_FEATURES = ("x", "y", "z", "speed", "bundle_size", "round", "passed")
 TASK_FEATURES = (
@@ -40,6 +41,36 @@ TASK_FEATURES = (
 )
 
 
+# bounds of the relative task position (÷ arena) and of the start distance (÷ arena diagonal): a task and an agent
+# both lie within ±arena on every axis, so a difference stays within ±2 arena sizes
+RELATIVE_BOUND = 2.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Scales:
+    """The units observations and the state are measured in: one home for their normalisation."""
+
+    arena: np.ndarray       # (3,) positions ÷ arena
+    diagonal: float         # distances ÷ the arena diagonal
+    reward_unit: float      # bids and rewards ÷ the largest task reward c̄
+    horizon: float          # times ÷ the latest finite window end
+    max_speed: float        # speeds ÷ the fastest agent
+
+    @classmethod
+    def of(cls, scenario: Scenario) -> Scales:
+        arena = np.asarray(scenario.arena, dtype=float)
+        finite_end = scenario.task_end[np.isfinite(scenario.task_end)]
+        horizon = float(finite_end.max()) if finite_end.size and finite_end.max() > 0 else 1.0
+        return cls(arena, float(np.linalg.norm(arena)), float(scenario.task_reward.max()) or 1.0, horizon,
+                   float(scenario.agent_speed.max()))
+
+    def window(self, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
+        """(M,) window start and end ÷ horizon, clipped to [0, 1] (an open window ends at the horizon)."""
+        start = np.clip(scenario.task_start / self.horizon, 0, 1)
+        end = np.clip(np.minimum(scenario.task_end, self.horizon) / self.horizon, 0, 1)
+        return start, end
+
+
 @dataclasses.dataclass(frozen=True)
 class ObservationLayout:
     """Column positions of the observation vector."""
@@ -50,6 +81,10 @@ class ObservationLayout:
     @property
     def own_names(self) -> tuple[str, ...]:
         return OWN_FEATURES + tuple(f"equipment_{e}" for e in range(self.n_equipment))
+
+    @property
+    def task_names(self) -> tuple[str, ...]:
+        return TASK_FEATURES
 
     @property
     def own_size(self) -> int:
@@ -86,9 +121,9 @@ class ObservationLayout:
         task_high[self.task_column("required_agents")] = max(1.0, max_agents_per_task / n_agents)
         task_high[self.task_column("rounds_since_change")] = max_rounds
         for name in ("dx", "dy", "dz"):
-            task_low[self.task_column(name)] = -2.0
-            task_high[self.task_column(name)] = 2.0
-        task_high[self.task_column("distance")] = 2.0
+            task_low[self.task_column(name)] = -RELATIVE_BOUND
+            task_high[self.task_column(name)] = RELATIVE_BOUND
+        task_high[self.task_column("distance")] = RELATIVE_BOUND
         low = np.concatenate([own_low, np.tile(task_low, self.n_tasks)])
         high = np.concatenate([own_high, np.tile(task_high, self.n_tasks)])
         return low, high
@@ -102,12 +137,7 @@ class ObservationBuilder:
         s = protocol.scenario
         self.layout = ObservationLayout(s.n_tasks, len(s.equipment_names))
         self.low, self.high = self.layout.bounds(max_agents_per_task, max_rounds, s.n_agents)
-        self.reward_unit = float(s.task_reward.max()) or 1.0
-        finite_end = s.task_end[np.isfinite(s.task_end)]
-        self.horizon = float(finite_end.max()) if finite_end.size and finite_end.max() > 0 else 1.0
-        self.arena = np.asarray(s.arena, dtype=float)
-        self.diagonal = float(np.linalg.norm(self.arena))
-        self.max_speed = float(s.agent_speed.max())
+        self.scales = Scales.of(s)
         self._static = self._static_task_features(protocol)
 
     def space(self) -> spaces.Box:
@@ -118,11 +148,10 @@ class ObservationBuilder:
         f = np.zeros((s.n_agents, s.n_tasks, self.layout.task_size))
         col = self.layout.task_column
         f[:, :, col("required_agents")] = s.task_agents[None, :] / s.n_agents
-        f[:, :, col("window_start")] = np.clip(s.task_start / self.horizon, 0, 1)[None, :]
-        f[:, :, col("window_end")] = np.clip(np.minimum(s.task_end, self.horizon) / self.horizon, 0, 1)[None, :]
-        rel = (s.task_pos[None, :, :] - s.agent_pos[:, None, :]) / self.arena
+        f[:, :, col("window_start")], f[:, :, col("window_end")] = self.scales.window(s)
+        rel = (s.task_pos[None, :, :] - s.agent_pos[:, None, :]) / self.scales.arena
         f[:, :, col("dx")], f[:, :, col("dy")], f[:, :, col("dz")] = rel[..., 0], rel[..., 1], rel[..., 2]
-        f[:, :, col("distance")] = protocol.model.dist_agent_task / self.diagonal
+        f[:, :, col("distance")] = protocol.model.dist_agent_task / self.scales.diagonal
         f[:, :, col("equipment_match")] = protocol.equipment_match
         return f
 
@@ -131,7 +160,7 @@ class ObservationBuilder:
         s = protocol.scenario
         kn = protocol.knowledge
         view = protocol.view()
-        unit = self.reward_unit
+        unit = self.scales.reward_unit
         col = self.layout.task_column
         f = self._static.copy()
         f[:, :, col("gain")] = view.gain / unit
@@ -149,8 +178,8 @@ class ObservationBuilder:
         f[:, :, col("prereqs_met")] = view.prereqs_met
         f[:, :, col("group_complete")] = view.members == s.task_agents[None, :]
         own = np.zeros((s.n_agents, self.layout.own_size))
-        own[:, :3] = s.agent_pos / self.arena
-        own[:, 3] = s.agent_speed / self.max_speed
+        own[:, :3] = s.agent_pos / self.scales.arena
+        own[:, 3] = s.agent_speed / self.scales.max_speed
         own[:, 4] = [len(b) / s.n_tasks for b in kn.bundles]
         own[:, 5] = min(protocol.round / protocol.max_rounds, 1.0)
         own[:, 6] = passed
@@ -172,18 +201,16 @@ class ObservationBuilder:
 def state_vector(protocol: Protocol) -> np.ndarray:
     """Global view: agent and task attributes, every agent's own row of bids (ground truth) and the round."""
     s = protocol.scenario
-    arena = np.asarray(s.arena, dtype=float)
-    unit = float(s.task_reward.max()) or 1.0
-    finite_end = s.task_end[np.isfinite(s.task_end)]
-    horizon = float(finite_end.max()) if finite_end.size and finite_end.max() > 0 else 1.0
+    scales = Scales.of(s)
+    window_start, window_end = scales.window(s)
     parts = [
-        (s.agent_pos / arena).ravel(),
+        (s.agent_pos / scales.arena).ravel(),
         s.agent_equipment.astype(float).ravel(),
-        (s.task_pos / arena).ravel(),
-        np.clip(s.task_start / horizon, 0, 1),
-        np.clip(np.minimum(s.task_end, horizon) / horizon, 0, 1),
+        (s.task_pos / scales.arena).ravel(),
+        window_start,
+        window_end,
         s.task_agents / s.n_agents,
-        (protocol.knowledge.own_bids() / unit).ravel(),
+        (protocol.knowledge.own_bids() / scales.reward_unit).ravel(),
         [min(protocol.round / protocol.max_rounds, 1.0)],
     ]
     return np.concatenate([np.asarray(p, dtype=float).ravel() for p in parts])

@@ -21,7 +21,6 @@ from taskalloc_env.bidding import BidView, bid_view
 from taskalloc_env.cbba_table import NONE
 from taskalloc_env.config import TaskAllocConfig, round_bound
 from taskalloc_env.consensus import Traffic, exchange
-from taskalloc_env.group_merge import Equipment
 from taskalloc_env.knowledge import NEVER, LocalKnowledge
 from taskalloc_env.network import CommGraph
 from taskalloc_env.scenario import Scenario
@@ -40,10 +39,8 @@ class Counters:
     messages: int = 0
     informative_messages: int = 0
     data_items: int = 0
-    data_items_dense: int = 0
     bids: int = 0
     quits: int = 0
-    released: int = 0
 
 
 class Protocol:
@@ -52,10 +49,9 @@ class Protocol:
     def __init__(self, scenario: Scenario, cfg: TaskAllocConfig) -> None:
         self.scenario = scenario
         self.cfg = cfg
-        self.model = ScoringModel(scenario, distance_cost=cfg.distance_cost, prereq_timing=cfg.prereq_timing,
-                                  reward_split=cfg.reward_split, marginal_gain=cfg.marginal_gain)
+        self.model = ScoringModel.from_config(scenario, cfg)
         self.graph = CommGraph(scenario.agent_pos, cfg.comm_range, cfg.edge_rule)
-        self.equipment = Equipment(scenario.agent_equipment, scenario.task_equipment)
+        self.equipment = self.model.equipment
         self.equipment_match = scenario.eligible()
         self.fillable = np.ones(scenario.n_tasks, dtype=bool)
         self.fillable[list(scenario.infeasible_tasks())] = False
@@ -70,7 +66,6 @@ class Protocol:
                                               know_everyone=not self.cfg.require_known_capacity)
         self.round = 0
         self.counters = Counters()
-        self.received = np.zeros(s.n_agents, dtype=np.int64)
         self.stable_rounds = 0
         self.converged = False
         self._paths = PathTable.empty(s.n_agents, s.n_tasks)
@@ -126,16 +121,21 @@ class Protocol:
         return self._score
 
     # -- Phase 1 decisions ---------------------------------------------------------------------------------------
+    def _quittable(self) -> np.ndarray:
+        """(N, M) the timer-free quit conditions (spec cbga §5.3 conditions 1–4): L_j > 1, i holds j, i never quit
+        j, and the group is incomplete in i's table. Quitting, the pending-quit test and the timer reset share it."""
+        kn = self.knowledge
+        return ((self.scenario.task_agents > 1)[None, :] & (kn.own_bids() > 0) & ~kn.quit
+                & (kn.member_counts() < self.scenario.task_agents[None, :]))
+
     def quit_options(self) -> np.ndarray:
-        """(N, M) quits the protocol allows now (spec cbga §5.3 conditions 1–4 and 6; cached until the next change)."""
+        """(N, M) quits the protocol allows now: quittable and the timer ran out, T − H_i[j] > δ (spec cbga §5.3
+        condition 6; cached until the next change)."""
         if self._quits is None:
-            kn = self.knowledge
             if not self.cfg.task_quitting:
-                self._quits = np.zeros(kn.quit.shape, dtype=bool)
+                self._quits = np.zeros(self.knowledge.quit.shape, dtype=bool)
             else:
-                self._quits = ((self.scenario.task_agents > 1)[None, :] & (kn.own_bids() > 0) & ~kn.quit
-                               & (kn.member_counts() < self.scenario.task_agents[None, :])
-                               & (self.round - kn.assigned_at > self.cfg.delta))
+                self._quits = self._quittable() & (self.round - self.knowledge.assigned_at > self.cfg.delta)
         return self._quits
 
     def bid(self, agent: int, task: int, view: BidView | None = None) -> float:
@@ -189,7 +189,6 @@ class Protocol:
         if self.cfg.quit_block == "until_change":
             kn.quit_members[agent, task] = int((kn.bids[agent, :, task] > 0).sum())
         self.counters.quits += 1
-        self.counters.released += len(released)
         self._touch(agent)
         return released
 
@@ -212,8 +211,6 @@ class Protocol:
         c.messages += traffic.messages
         c.informative_messages += traffic.informative
         c.data_items += traffic.data_items
-        c.data_items_dense += traffic.data_items_dense
-        self.received += traffic.received
         changed = not np.array_equal(kn.bids, self._last_bids) or kn.bundles != self._last_bundles
         self._last_bids = kn.bids.copy()
         self._last_bundles = [list(b) for b in kn.bundles]
@@ -230,7 +227,7 @@ class Protocol:
             sequence = bundle if self.cfg.release_order == "bundle" else kn.paths[i]
             lost = next((j for j in sequence if own[i, j] <= 0), None)
             if lost is not None:
-                self.counters.released += len(kn.release(i, lost, self.cfg.release_order))
+                kn.release(i, lost, self.cfg.release_order)
                 self._dirty.add(i)
 
     def _reset_quit_timers(self, before: np.ndarray) -> None:
@@ -240,19 +237,13 @@ class Protocol:
             updated = ((kn.bids > 0) & ~(before > 0)).any(axis=1)
         else:
             updated = (kn.bids != before).any(axis=1)
-        held = kn.own_bids() > 0
-        incomplete = kn.member_counts() < self.scenario.task_agents[None, :]
-        reset = updated & held & incomplete & (self.scenario.task_agents > 1)[None, :] & ~kn.quit
-        kn.assigned_at[reset] = self.round
+        kn.assigned_at[updated & self._quittable()] = self.round
 
     def _quit_pending(self) -> bool:
-        """A held incomplete group whose quit timer had not run out in the last bundle phase: a quit may follow."""
+        """A quittable task whose timer had not run out in the last bundle phase: a quit may still follow."""
         if not self.cfg.task_quitting:
             return False
-        kn = self.knowledge
-        quittable = ((self.scenario.task_agents > 1)[None, :] & (kn.own_bids() > 0) & ~kn.quit
-                     & (kn.member_counts() < self.scenario.task_agents[None, :]))
-        return bool(np.any(quittable & (self.round - 1 - kn.assigned_at <= self.cfg.delta)))
+        return bool(np.any(self._quittable() & (self.round - 1 - self.knowledge.assigned_at <= self.cfg.delta)))
 
     # -- agreement -------------------------------------------------------------------------------------------------
     def agreement(self) -> bool:

@@ -18,6 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from taskalloc_env.config import TaskAllocConfig, type_counts
+from taskalloc_env.groups import Equipment
 
 NO_DEADLINE = np.inf
 
@@ -146,17 +147,16 @@ class Scenario:
     def infeasible_tasks(self) -> dict[int, str]:
         """Tasks no team of this scenario can ever complete, with the reason (reported, not an error)."""
         reasons: dict[int, str] = {}
-        eligible = self.eligible()
-        capable = eligible.sum(axis=0)
-        have = self.agent_equipment.sum(axis=0)
+        capable = self.eligible().sum(axis=0)
+        everyone = np.ones((self.n_agents, self.n_tasks), dtype=bool)
+        short = Equipment(self.agent_equipment, self.task_equipment).items(everyone) < self.task_equipment
         for j in range(self.n_tasks):
             if capable[j] < self.task_agents[j]:
                 reasons[j] = (f"needs L_j = {self.task_agents[j]} agents but only {capable[j]} carry "
                               "equipment it accepts")
-                continue
-            short = [self.equipment_names[e] for e in np.flatnonzero(self.task_equipment[j] > have)]
-            if short:
-                reasons[j] = f"needs more agents with {short} than the scenario has"
+            elif short[j].any():
+                names = [self.equipment_names[e] for e in np.flatnonzero(short[j])]
+                reasons[j] = f"needs more agents with {names} than the scenario has"
         return reasons
 
     @classmethod

@@ -24,6 +24,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from taskalloc_env.config import TaskAllocConfig
+from taskalloc_env.groups import Equipment
 from taskalloc_env.scenario import Scenario
 
 
@@ -48,8 +50,10 @@ class Schedule:
 class ScoringModel:
     """Scenario-derived arrays and the scoring options; all times and distances precomputed once."""
 
-    def __init__(self, scenario: Scenario, *, distance_cost: str = "leg", prereq_timing: str = "conservative",
-                 reward_split: str = "per_agent", marginal_gain: str = "rescore") -> None:
+    def __init__(self, scenario: Scenario, *, distance_cost: str = TaskAllocConfig.distance_cost,
+                 prereq_timing: str = TaskAllocConfig.prereq_timing, reward_split: str = TaskAllocConfig.reward_split,
+                 marginal_gain: str = TaskAllocConfig.marginal_gain) -> None:
+        """Scoring options default to the config's defaults (``TaskAllocConfig``), their one home."""
         self.scenario = scenario
         self.distance_cost = distance_cost
         self.marginal_gain = marginal_gain
@@ -63,6 +67,7 @@ class ScoringModel:
         self.earliest = np.maximum(s.task_start, self.ready)
         self.deadline = s.task_end
         self.doable = self.earliest < self.deadline
+        self.equipment = Equipment(s.agent_equipment, s.task_equipment)
         for array in (self.dist_agent_task, self.dist_task_task, self.pay, self.ready, self.earliest, self.doable):
             array.setflags(write=False)
 
@@ -74,6 +79,12 @@ class ScoringModel:
         base = s.task_end if prereq_timing == "conservative" else s.task_start
         done = base + s.task_duration
         return np.where(s.task_prereqs, done[None, :], -np.inf).max(axis=1)
+
+    @classmethod
+    def from_config(cls, scenario: Scenario, cfg: TaskAllocConfig) -> ScoringModel:
+        """The scoring model of ``scenario`` under the scoring options of ``cfg`` (the one place it is built)."""
+        return cls(scenario, distance_cost=cfg.distance_cost, prereq_timing=cfg.prereq_timing,
+                   reward_split=cfg.reward_split, marginal_gain=cfg.marginal_gain)
 
     # -- paths and marginal gains, batched over agents ---------------------------------------------------------
     def schedule(self, agent: int, path: Sequence[int]) -> Schedule:
@@ -226,12 +237,6 @@ class Plan:
         return [self.timing.schedule(a) for a in range(len(self.gain))]
 
 
-def equipment_covered(scenario: Scenario, members: np.ndarray) -> np.ndarray:
-    """(M,) te_j ⊆ ⊎ ae_members (multiset inclusion, spec cbga §1.4 (3.5)) for a (N, M) member matrix."""
-    have = members.T.astype(np.int64) @ scenario.agent_equipment.astype(np.int64)      # (M, E)
-    return np.all(have >= scenario.task_equipment, axis=1)
-
-
 def prerequisites_valid(scenario: Scenario, valid: np.ndarray) -> np.ndarray:
     """Drop tasks whose prerequisites are not all valid, transitively (spec cbga §1.7 [INF])."""
     valid = valid.copy()
@@ -319,7 +324,7 @@ def team_score(model: ScoringModel, paths: Sequence[Schedule] | PathTable,
         for j in np.flatnonzero(conflicts):
             order = sorted(np.flatnonzero(members[:, j]), key=lambda i: (table.start[i, j], -i))
             paid[order[: s.task_agents[j]], j] = True
-    valid = paid.any(axis=0) & equipment_covered(s, paid)
+    valid = paid.any(axis=0) & model.equipment.covers(paid)
     valid = prerequisites_valid(s, valid)
     paid &= valid[None, :]
     agent_scores = np.where(paid, table.reward, 0.0).sum(axis=1) - table.cost

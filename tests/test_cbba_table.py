@@ -132,14 +132,38 @@ def test_cbba_table_cell(table, sender_belief, receiver_belief, rule, text):
         assert NAMES[int(vectorised[row, 0])] == NAMES[expected], f"vectorised: {text} [{cond.label}]"
 
 
-def test_table_has_seventeen_cells_covering_every_belief_pair():
-    """spec cbba_acbba §8.7: every (sender belief, receiver belief) pair is covered by exactly one row."""
-    pairs = [(s, r) for s, r, _, _ in CANONICAL]
-    assert len(pairs) == len(set(pairs)) == 17
-    for s in ("k", "i", "m", "none"):
-        receivers = {r for s2, r in pairs if s2 == s}
-        expected = {"i", "k", "third", "none"} | ({"m"} if s == "m" else set())
-        assert receivers == expected
+@pytest.mark.parametrize("table, rows", [("canonical", CANONICAL), ("thesis", THESIS)])
+def test_every_pair_of_winner_ids_follows_its_cell(table, rows):
+    """spec cbba_acbba §8.7: each (sender's winner, receiver's winner) pair of *actual ids* — every agent 0..4 or none,
+    third agents on either side of i and k in id order — is decided by the one cell that names the pair's roles."""
+    rule = {(s, r): f for s, r, f, _ in rows}
+    role = {I_ID: "i", K_ID: "k"}
+    for z_k, z_i in itertools.product([NONE, *range(N_AGENTS)], repeat=2):
+        sender = "none" if z_k == NONE else role.get(z_k, "m")
+        receiver = "none" if z_i == NONE else role.get(z_i, "m" if z_i == z_k else "third")
+        for (tk_name, tk), (ti_name, ti), (bid_name, db) in itertools.product(TIMES.items(), TIMES.items(),
+                                                                             BIDS.items()):
+            s_i = np.full(N_AGENTS, 5.0)
+            s_k = np.full(N_AGENTS, 5.0)
+            s_k[K_ID], s_i[K_ID] = 7.0, 6.0
+            if z_k not in (NONE, I_ID, K_ID):
+                s_k[z_k] += tk
+            if z_i not in (NONE, I_ID, K_ID, z_k):
+                s_k[z_i] += ti
+            y_i = 0.0 if z_i == NONE else 50.0
+            y_k = 0.0 if z_k == NONE else 50.0 + db
+            third_k = z_k not in (NONE, I_ID, K_ID)
+            third_i = z_i not in (NONE, I_ID, K_ID)
+            cond = SimpleNamespace(fresh_m=third_k and s_k[z_k] > s_i[z_k], stale_m=third_k and s_i[z_k] > s_k[z_k],
+                                   fresh_n=third_i and s_k[z_i] > s_i[z_i],
+                                   better=bool(outbids(np.float64(y_k), np.int64(z_k), np.float64(y_i),
+                                                       np.int64(z_i))))
+            got = decide(I_ID, K_ID, np.array([z_i]), np.array([y_i]), np.array([z_k]), np.array([y_k]), s_i, s_k,
+                         table=table)
+            want = rule[(sender, receiver)](cond)
+            assert NAMES[int(got[0])] == NAMES[want], (
+                f"sender believes {z_k} ({sender}), receiver {z_i} ({receiver}); s[z_k] {tk_name}, s[z_i] {ti_name}, "
+                f"bid {bid_name}")
 
 
 def test_whole_message_is_decided_per_task():

@@ -124,8 +124,12 @@ def test_bad_yaml_file(tmp_path):
         load_config("no_such_scenario")
 
 
-def test_config_error_is_a_value_error():
-    assert issubclass(ConfigError, ValueError)
+def test_config_errors_are_caught_as_value_errors_by_callers():
+    """Code that guards a call with ``except ValueError`` (as argparse-style callers and the env's users do) sees a
+    bad config as a ValueError that names the field and the allowed values."""
+    with pytest.raises(ValueError, match=r"'n_agents': got 0; allowed: an integer >= 1") as info:
+        TaskAllocConfig(n_agents=0)
+    assert isinstance(info.value, ConfigError)
 
 
 # -- infeasible requirements are reported, not raised ----------------------------------------------------------

@@ -12,7 +12,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from taskalloc_env.group_merge import Equipment, merge
+from taskalloc_env.group_merge import merge
+from taskalloc_env.groups import Equipment
 
 N_AGENTS = 6
 RECEIVER, SENDER = 0, 1

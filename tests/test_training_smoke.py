@@ -11,11 +11,11 @@ import yaml
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("sb3_contrib")
 
+from evaluation.seeds import VALIDATION_SEED_START
 from policies import make_policy, rollout
 from policies.learned import LearnedPolicy
 from taskalloc_env import TaskAllocEnv
 from training import train
-from training.heldout import VALIDATION_SEED_START
 
 SMALL = ["--n-envs", "8", "--n-steps", "32", "--batch-size", "256", "--n-epochs", "5", "--eval-episodes", "24",
          "--progress-bar", "false", "--tensorboard", "false"]
@@ -54,7 +54,7 @@ def test_ppo_smoke_run_improves_on_its_starting_policy(tmp_path):
     assert saved["total_steps"] == 6000 and saved["n_envs"] == 8 and saved["env_overrides"]["n_agents"] == 3
     assert train.load_config(["--config", str(tmp_path / "config.yaml")]) == train.load_config(args)
     # the saved model is what the last evaluation measured
-    policy = LearnedPolicy.load(tmp_path / "model.zip")
+    policy = LearnedPolicy.load(tmp_path / "model.json")
     env = TaskAllocEnv("train_small", max_cycles=200, reward_scale=100.0, **HARD)
     score = np.mean([rollout(env, policy, seed=s).score for s in seeds])
     assert score == pytest.approx(rows[-1]["score"])
@@ -65,7 +65,7 @@ def test_behaviour_cloning_then_ppo_and_a_mixed_team(tmp_path):
                           "--bc-episodes", "40", "--bc-epochs", "6", "--bc-learning-rate", "3e-3",
                           "--total-steps", "1024", "--eval-freq", "0", "--scripted-agents", "{uav_0: cbga}",
                           *SMALL])
-    assert (tmp_path / "bc.zip").exists() and (tmp_path / "model.zip").exists()
+    assert {"bc.json", "bc.safetensors", "model.json", "model.safetensors"} <= {p.name for p in tmp_path.iterdir()}
     assert summary["bc"]["final_epoch"]["accuracy"] > 0.9
     # evaluation used the same mixed team: CBGA plays uav_0, the learned policy the other three agents
     assert summary["ppo"]["baseline_score"] > 0

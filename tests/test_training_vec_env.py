@@ -173,7 +173,7 @@ def test_sb3_algorithms_run_on_the_adapter_with_a_seed(algo):
     from sb3_contrib import MaskablePPO
     from stable_baselines3 import PPO
 
-    from training.network import TaskMaskablePolicy, TaskPolicy
+    from training.sb3_policy import TaskMaskablePolicy, TaskPolicy
 
     algo_class, policy = (MaskablePPO, TaskMaskablePolicy) if algo == "maskable_ppo" else (PPO, TaskPolicy)
     venv = make(n_copies=2)

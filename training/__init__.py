@@ -1,1 +1,3 @@
-"""Training and evaluation: SB3 adapter, pooling network, BC/PPO training, paired evaluation, experiment runner."""
+"""Reinforcement learning of bidding policies: the SB3 vector-env adapter, behaviour cloning, PPO training runs,
+callbacks and learning curves. Evaluation lives in ``evaluation``, the networks and the learned policy in
+``policies``."""

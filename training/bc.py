@@ -18,8 +18,8 @@ import torch as th
 from stable_baselines3.common.policies import ActorCriticPolicy
 
 from policies.registry import make_policy
+from policies.teams import ScriptedTeammates, check_scripted_agents
 from taskalloc_env.env import TaskAllocEnv
-from training.teams import ScriptedTeammates, check_scripted_agents
 
 
 @dataclasses.dataclass
@@ -80,6 +80,9 @@ def collect_demonstrations(env_kwargs: Mapping[str, Any], n_episodes: int, seed_
     )
 
 
+MAX_GRAD_NORM = 1.0   # clip the gradient norm of a behaviour-cloning step (SB3's PPO clips at 0.5)
+
+
 def behaviour_cloning(policy: ActorCriticPolicy, demos: Demonstrations, epochs: int = 10, batch_size: int = 256,
                       learning_rate: float = 1e-3, vf_coef: float = 0.5, ent_coef: float = 0.0, seed: int = 0,
                       log: Any = None) -> list[dict[str, float]]:
@@ -115,7 +118,7 @@ def behaviour_cloning(policy: ActorCriticPolicy, demos: Demonstrations, epochs: 
             loss = nll + vf_coef * value_mse - ent_coef * entropy
             optimizer.zero_grad()
             loss.backward()
-            th.nn.utils.clip_grad_norm_(policy.parameters(), 1.0)
+            th.nn.utils.clip_grad_norm_(policy.parameters(), MAX_GRAD_NORM)
             optimizer.step()
             n = len(idx)
             sums["loss"] += loss.item() * n

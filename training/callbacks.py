@@ -11,9 +11,12 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from policies.learned import LearnedPolicy
+from evaluation.episodes import evaluate, summarise
 from policies.registry import make_policy
-from training.heldout import evaluate, summarise, with_teammates
+from policies.teams import with_teammates
+from taskalloc_env.env import TaskAllocEnv
+from taskalloc_env.observation import ObservationLayout
+from training.sb3_policy import as_learned, save_checkpoint
 
 EVAL_COLUMNS = ("timesteps", "wall_time", "score", "score_std", "valid_tasks", "rounds", "messages",
                 "baseline_score", "ratio")
@@ -35,17 +38,18 @@ class PeriodicEvalCallback(BaseCallback):
     """Every ``eval_freq`` steps: the deterministic policy on fixed seeds vs ``baseline`` on the same seeds.
 
     Logs ``eval/score``, ``eval/baseline_score``, ``eval/ratio`` (and valid tasks, rounds, messages), appends a row
-    to ``csv_path`` and saves the best model so far to ``best_path``.
+    to ``csv_path`` and saves the best model so far as a checkpoint at ``best_path`` (a stem).
     """
 
     def __init__(self, env_kwargs: Mapping[str, Any], seeds: Sequence[int], eval_freq: int, csv_path: Path,
                  best_path: Path | None = None, baseline: str = "cbgabi",
                  scripted_agents: Mapping[str, str] | None = None, meta: Mapping[str, Any] | None = None,
-                 start_steps: int = 0) -> None:
+                 start_steps: int = 0, layout: ObservationLayout | None = None) -> None:
         super().__init__()
         self.env_kwargs, self.seeds, self.eval_freq = dict(env_kwargs), list(seeds), eval_freq
         self.csv_path, self.best_path, self.scripted_agents = Path(csv_path), best_path, dict(scripted_agents or {})
         self.meta = dict(meta or {})
+        self.layout = layout or TaskAllocEnv(**self.env_kwargs).observation_layout
         self.start_steps = start_steps
         baseline_policy = with_teammates(make_policy(baseline), self.scripted_agents)
         self.baseline_score = summarise(evaluate(baseline_policy, self.env_kwargs, self.seeds))["score"]
@@ -62,7 +66,7 @@ class PeriodicEvalCallback(BaseCallback):
         self._next = self.num_timesteps
 
     def evaluate_now(self) -> dict[str, float]:
-        learned = LearnedPolicy(self.model.policy, self.meta, deterministic=True, name="current")
+        learned = as_learned(self.model.policy, self.layout, self.env_kwargs, name="current")
         stats = summarise(evaluate(with_teammates(learned, self.scripted_agents), self.env_kwargs, self.seeds))
         ratio = stats["score"] / self.baseline_score if self.baseline_score else float("nan")
         steps = self.start_steps + self.num_timesteps
@@ -77,7 +81,8 @@ class PeriodicEvalCallback(BaseCallback):
         if stats["score"] > self.best:
             self.best = stats["score"]
             if self.best_path is not None:
-                self.model.save(self.best_path)
+                save_checkpoint(self.best_path, self.model.policy, self.layout, self.env_kwargs,
+                                {**self.meta, "timesteps": steps, "validation_score": stats["score"]})
         return row
 
     def _on_step(self) -> bool:

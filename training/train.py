@@ -6,10 +6,11 @@
 
 Every field of :class:`TrainConfig` can be set in the YAML file and overridden on the command line
 (``--field-name value``; values are read as YAML, so ``null``, ``true``, ``1e-4`` and ``{k: v}`` work).
-The run writes to ``out_dir`` (default ``runs/<name>``): ``config.yaml`` (the resolved config), ``bc.zip``
-(after behaviour cloning), ``model.zip`` (final), ``eval.csv`` (periodic evaluation on validation seeds against
-CBGABI) and ``summary.yaml`` (timings, throughput, final evaluation); TensorBoard logs, checkpoints and the best
-model by validation score go to ``log_dir`` (default ``runs/<name>``).
+The run writes to ``out_dir`` (default ``runs/<name>``): ``config.yaml`` (the resolved config), checkpoints
+(``policies.checkpoint``: JSON + safetensors) ``bc`` after behaviour cloning and ``model`` at the end, ``eval.csv``
+(periodic evaluation on validation seeds against CBGABI) and ``summary.yaml`` (timings, throughput, final
+evaluation); TensorBoard logs, SB3 checkpoints and the best model by validation score (``best``) go to ``log_dir``
+(default ``runs/<name>``).
 
 The script reads top to bottom like a CleanRL script: config, environments, model, imitation warm start, PPO,
 saving.
@@ -33,12 +34,21 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
 from stable_baselines3.common.utils import set_random_seed
 
-from policies.learned import LearnedPolicy
+from evaluation.episodes import evaluate, summarise
+from evaluation.seeds import DEMO_SEED_START, TEST_SEEDS, VALIDATION_SEED_START
+from policies.networks import count_parameters
+from policies.teams import scripted_env_overrides, with_teammates
+from taskalloc_env.env import TaskAllocEnv
+from taskalloc_env.observation import ObservationLayout
 from training.bc import behaviour_cloning, collect_demonstrations
 from training.callbacks import EpisodeMetricsCallback, PeriodicEvalCallback
-from training.heldout import DEMO_SEED_START, TEST_SEEDS, VALIDATION_SEED_START, evaluate, summarise, with_teammates
-from training.network import TaskMaskablePolicy, TaskPolicy, count_parameters
-from training.teams import scripted_env_overrides
+from training.sb3_policy import (
+    TaskMaskablePolicy,
+    TaskPolicy,
+    as_learned,
+    load_actor_weights,
+    save_checkpoint,
+)
 from training.vec_env import TaskAllocVecEnv, make_env_fns
 
 ALGOS = {"maskable_ppo": (MaskablePPO, TaskMaskablePolicy), "ppo": (PPO, TaskPolicy)}
@@ -165,13 +175,22 @@ def build_model(cfg: TrainConfig, venv: TaskAllocVecEnv) -> MaskablePPO | PPO:
         device="cpu", policy_kwargs={"body": cfg.body, "hidden": cfg.hidden},
         tensorboard_log=str(Path(cfg.log_dir) / "tb") if cfg.tensorboard else None,
     )
-    # saved inside every checkpoint; LearnedPolicy reads the protocol options from it
-    model.taskalloc = {"scenario": cfg.scenario, "env_overrides": dict(cfg.env_kwargs()), "name": cfg.name}
     return model
 
 
+def meta(cfg: TrainConfig) -> dict[str, Any]:
+    """What a checkpoint of this run records about it (plain JSON)."""
+    return {"name": cfg.name, "scenario": cfg.scenario, "algo": cfg.algo, "seed": cfg.seed,
+            "env_kwargs": {k: v for k, v in cfg.env_kwargs().items() if k != "scenario"}}
+
+
+def layout(cfg: TrainConfig) -> ObservationLayout:
+    """The observation layout of the run's environment (what its checkpoints are trained on)."""
+    return TaskAllocEnv(**cfg.env_kwargs()).observation_layout
+
+
 def validation_score(model: MaskablePPO | PPO, cfg: TrainConfig) -> dict[str, float]:
-    learned = LearnedPolicy(model.policy, model.taskalloc, name=cfg.name)
+    learned = as_learned(model.policy, layout(cfg), cfg.env_kwargs(), name=cfg.name)
     seeds = range(VALIDATION_SEED_START, VALIDATION_SEED_START + cfg.eval_episodes)
     return summarise(evaluate(with_teammates(learned, cfg.scripted_agents), cfg.env_kwargs(), seeds))
 
@@ -193,7 +212,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     model = build_model(cfg, venv)
     summary["parameters"] = count_parameters(model.policy)
     if cfg.init_from:
-        model.set_parameters(cfg.init_from, exact_match=False, device="cpu")
+        load_actor_weights(model.policy, cfg.init_from)
 
     # -- imitation warm start ------------------------------------------------------------------------------------------
     if cfg.bc_episodes > 0:
@@ -208,7 +227,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                                                           f"entropy {row['entropy']:.4f} "
                                                           f"accuracy {row['accuracy']:.4f} "
                                                           f"value mse {row['value_mse']:.4f}", flush=True))
-        model.save(out_dir / "bc.zip")
+        save_checkpoint(out_dir / "bc", model.policy, layout(cfg), cfg.env_kwargs(), {**meta(cfg), "stage": "bc"})
         summary["bc"] = {"samples": len(demos), "expert_score": float(demos.episode_scores.mean()),
                          "collect_seconds": round(t1 - t0, 1), "train_seconds": round(time.perf_counter() - t1, 1),
                          "final_epoch": history[-1], "validation": validation_score(model, cfg)}
@@ -218,8 +237,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if cfg.total_steps > 0:
         eval_callback = PeriodicEvalCallback(
             cfg.env_kwargs(), range(VALIDATION_SEED_START, VALIDATION_SEED_START + cfg.eval_episodes),
-            cfg.eval_freq, out_dir / "eval.csv", best_path=log_dir / "best.zip", baseline=cfg.eval_baseline,
-            scripted_agents=cfg.scripted_agents, meta=model.taskalloc)
+            cfg.eval_freq, out_dir / "eval.csv", best_path=log_dir / "best", baseline=cfg.eval_baseline,
+            scripted_agents=cfg.scripted_agents, meta=meta(cfg), layout=layout(cfg))
         callbacks = [EpisodeMetricsCallback(), eval_callback]
         if cfg.checkpoint_freq > 0:
             callbacks.append(CheckpointCallback(max(1, cfg.checkpoint_freq // venv.num_envs),
@@ -232,7 +251,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                           "agent_steps_per_second": round(model.num_timesteps / seconds, 1),
                           "env_steps_per_second": round(model.num_timesteps / venv.agents_per_copy / seconds, 1),
                           "baseline_score": eval_callback.baseline_score, "best_validation": eval_callback.best}
-    model.save(out_dir / "model.zip")
+    save_checkpoint(out_dir / "model", model.policy, layout(cfg), cfg.env_kwargs(), meta(cfg))
     venv.close()
     summary["validation"] = validation_score(model, cfg)
     summary["wall_seconds"] = round(time.perf_counter() - t_start, 1)

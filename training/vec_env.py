@@ -32,7 +32,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 from stable_baselines3.common.vec_env.base_vec_env import CloudpickleWrapper, VecEnv, VecEnvIndices
 
-from training.teams import ScriptedTeammates, check_scripted_agents
+from policies.teams import ScriptedTeammates, check_scripted_agents
 
 EnvFn = Callable[[], ParallelEnv]
 MASK_METHOD = "action_masks"

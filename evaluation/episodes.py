@@ -21,7 +21,7 @@ import hashlib
 import multiprocessing
 import os
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
@@ -30,13 +30,16 @@ from tqdm import tqdm
 
 from policies import exact, make_policy, rollout, sgama
 from policies.base import Policy
-from policies.exact import MAX_AGENTS, MAX_TASKS
+from policies.centralised import MAX_AGENTS, MAX_TASKS
 from taskalloc_env import Scenario, TaskAllocConfig, TaskAllocEnv
+from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import max_required_agents
 
 CENTRALISED = {"sgama": ("SGAMA", sgama), "exact": ("exact", exact)}
 METRICS = ("score", "valid_tasks", "conflicts", "rounds", "messages", "comm_steps", "informative_messages",
            "data_items", "bids", "quits")
+SUMMARY_FIELDS = ("score", "valid_tasks", "rounds", "messages")
+MAX_CHUNK = 16
 PROTOCOL_METRICS = ("rounds", "messages", "comm_steps", "informative_messages", "data_items", "quits")
 
 
@@ -91,15 +94,38 @@ def fingerprint(scenario: Scenario) -> str:
     return digest.hexdigest()[:12]
 
 
+def solve(solver: str | Policy, env: TaskAllocEnv, seed: int) -> Allocation:
+    """Solve instance ``seed`` of ``env``: roll a policy out, or hand the instance to a centralised solver.
+
+    ``solver`` is a name (a policy, ``sgama`` or ``exact``) or a policy object; ``env`` must carry the policy's
+    ``env_overrides``.
+    """
+    if isinstance(solver, str) and solver.lower() in CENTRALISED:
+        env.reset(seed=seed)
+        return CENTRALISED[solver.lower()][1](env.unwrapped.scenario, env.config)
+    policy = policy_for(solver) if isinstance(solver, str) else solver
+    return rollout(env, policy, seed=seed)
+
+
+def evaluate(policy: Policy, env_kwargs: Mapping[str, Any], seeds: Sequence[int]) -> list[Allocation]:
+    """One episode per seed of an in-memory policy; the env gets ``env_kwargs`` plus the policy's overrides."""
+    env = TaskAllocEnv(**{**env_kwargs, **policy.env_overrides})
+    return [solve(policy, env, int(seed)) for seed in seeds]
+
+
+def summarise(allocations: Sequence[Allocation]) -> dict[str, float]:
+    """Means of score, valid tasks, rounds and messages, plus the score's standard deviation."""
+    rows = [a.summary() for a in allocations]
+    out = {k: float(np.mean([r[k] for r in rows])) for k in SUMMARY_FIELDS}
+    out["score_std"] = float(np.std([r["score"] for r in rows]))
+    return out
+
+
 def run_episode(episode: Episode) -> dict[str, Any]:
     """Solve one instance; the row holds the labels, the solver, the seed, the fingerprint and the figures."""
     key = episode.solver.lower()
     env = _env(episode.solver, episode.config)
-    if key in CENTRALISED:
-        env.reset(seed=episode.seed)
-        allocation = CENTRALISED[key][1](env.unwrapped.scenario, env.config)
-    else:
-        allocation = rollout(env, policy_for(episode.solver), seed=episode.seed)
+    allocation = solve(episode.solver, env, episode.seed)
     figures = allocation.summary()
     n_agents = episode.config.n_agents
     figures["comm_steps"] = figures["messages"] / n_agents
@@ -131,7 +157,8 @@ def _map(episodes: Sequence[Episode], jobs: int) -> Iterator[dict[str, Any]]:
     if jobs <= 1 or len(episodes) < 2:
         yield from map(run_episode, episodes)
         return
-    chunksize = max(1, min(16, len(episodes) // (8 * jobs)))
+    # about eight chunks per worker keep the load balanced; at most MAX_CHUNK episodes travel per task
+    chunksize = max(1, min(MAX_CHUNK, len(episodes) // (8 * jobs)))
     # forking a process whose torch thread pools are up can deadlock the children (a learned policy loaded in
     # this process); then workers start from a clean forkserver and load their own copy
     context = multiprocessing.get_context("forkserver" if "torch" in sys.modules else "fork")

@@ -68,6 +68,7 @@ class PairedComparison:
     n: int
     mean_diff: float        # mean of a − b
     sd_diff: float
+    ci95: tuple[float, float]   # 95 % t-interval of the mean difference
     ratio: float            # mean(a) / mean(b)
     p_t: float              # paired t-test, two-sided
     p_wilcoxon: float
@@ -81,9 +82,11 @@ def paired(a: Sequence[float], b: Sequence[float]) -> PairedComparison:
     if a_arr.shape != b_arr.shape:
         raise ValueError(f"paired samples need equal lengths, got {a_arr.size} and {b_arr.size}")
     mean_diff, sd_diff = mean_sd(a_arr - b_arr)
+    half = float(stats.t.ppf(0.975, a_arr.size - 1) * sd_diff / np.sqrt(a_arr.size)) if a_arr.size > 1 else np.nan
     denominator = b_arr.mean() if b_arr.size else float("nan")
     ratio = float(a_arr.mean() / denominator) if denominator else float("nan")
-    return PairedComparison(n=int(a_arr.size), mean_diff=mean_diff, sd_diff=sd_diff, ratio=ratio,
+    return PairedComparison(n=int(a_arr.size), mean_diff=mean_diff, sd_diff=sd_diff,
+                            ci95=(mean_diff - half, mean_diff + half), ratio=ratio,
                             p_t=paired_t_pvalue(a_arr, b_arr), p_wilcoxon=wilcoxon_pvalue(a_arr, b_arr),
                             better=share_better(a_arr, b_arr), tied=share_tied(a_arr, b_arr))
 

@@ -1,8 +1,20 @@
-"""The exact optimum of the allocation objective for small instances (up to about 4 agents × 6 tasks).
+"""Centralised solvers on the same objective as the consensus algorithms: SGAMA and the exact optimum.
 
-The objective is the team score of spec cbga §1.7: every agent flies its own path (timing (3.8)–(3.10)), only
-valid tasks pay, travel always costs. Joining a task that ends up invalid only costs, so an optimum uses valid
-tasks only. Two exact steps:
+Both see the whole scenario at once (no messages, no rounds) and return an ``Allocation`` scored by the same code as
+``env.evaluate()``, so every solver is compared on equal terms.
+
+``sgama``: the thesis's centralised sequential greedy algorithm for multi-agent assignments (Alg 7, spec cbga §6.7).
+Each iteration assigns the one (agent, task) pair with the largest c_ij + Σ_n x_nj (its marginal gain plus the
+bids already on the task), among pairs that are eligible (equipment, prerequisites per ``prereq_mode``, a feasible
+insertion with c_ij > 0) and where the group has room that the agent's equipment fills. The winner inserts the task
+at its best slot and records its bid, the step Alg 7 leaves out. With every L_j = 1 this is SGA (spec cbba §3).
+Ties go to the lowest agent id, then the lowest task id (Alg 7 scans agents, then tasks, with a strict ">").
+
+``exact``: the optimum of the team score (spec cbga §1.7) for small instances, at most ``MAX_AGENTS`` = 6 agents
+and ``MAX_TASKS`` = 9 tasks. The time grows with how many tasks one agent can chain: on a 2-core machine, 4 × 8
+with L_j = 2 and start times in [0, 50] took 1–16 s per instance, 6 × 9 over a minute. Every agent flies its own
+path (timing (3.8)–(3.10)), only valid tasks pay, travel always costs. Joining a task that ends up invalid only
+costs, so an optimum uses valid tasks only. Two exact steps:
 
 1. per agent, every feasible ordered path by depth-first search (appending a task never changes earlier times),
    keeping the best order of each task subset;
@@ -15,11 +27,46 @@ from __future__ import annotations
 
 import numpy as np
 
-from policies.sgama import scoring_model
 from taskalloc_env.allocation import Allocation
+from taskalloc_env.bidding import complete_groups, prerequisites_met
 from taskalloc_env.config import TaskAllocConfig
+from taskalloc_env.groups import admit
 from taskalloc_env.scenario import Scenario
 from taskalloc_env.scoring import ScoringModel
+
+
+def sgama(scenario: Scenario, cfg: TaskAllocConfig | None = None) -> Allocation:
+    """Solve ``scenario`` centrally with SGAMA; scored like ``env.evaluate()`` (``cfg`` gives the scoring options)."""
+    cfg = cfg or TaskAllocConfig(n_agents=scenario.n_agents, n_tasks=scenario.n_tasks)
+    model = ScoringModel.from_config(scenario, cfg)
+    n, m = scenario.n_agents, scenario.n_tasks
+    match = scenario.eligible()
+    paths: list[list[int]] = [[] for _ in range(n)]
+    x = np.zeros((n, m))                        # x_ij: the bid agent i placed on task j
+    plan = model.plan(range(n), paths)
+    gains, slots = plan.gain, plan.slot
+    cap = cfg.max_bundle or m
+    iterations = 0
+    while True:
+        members = x > 0
+        # Alg 7 fills free slots only: the group admission rule's "room", never a displacement
+        room = admit(np.broadcast_to(x, (n, n, m)), np.broadcast_to(np.arange(n)[:, None], (n, m)), gains,
+                     scenario.task_agents, model.equipment).room
+        complete = complete_groups(x[None], scenario, model.equipment) if cfg.prereq_mode == "all_complete" else None
+        prereqs = prerequisites_met(scenario, cfg.prereq_mode, members.sum(axis=0)[None], complete)[0]
+        sizes = np.array([len(p) for p in paths])
+        ok = (match & (gains > 0) & ~members & room & prereqs[None, :]
+              & (sizes < cap)[:, None])
+        if not ok.any():
+            break
+        value = np.where(ok, gains + x.sum(axis=0)[None, :], -np.inf)
+        i, j = np.unravel_index(int(np.argmax(value)), value.shape)     # row-major: lowest agent, then task
+        x[i, j] = gains[i, j]
+        paths[i].insert(int(slots[i, j]), int(j))
+        gains[i], slots[i] = model.insertion_gains(i, paths[i])
+        iterations += 1
+    return Allocation.from_paths(model, paths, cfg.conflict_policy, rounds=iterations, bids=iterations)
+
 
 MAX_AGENTS, MAX_TASKS = 6, 9
 
@@ -53,7 +100,7 @@ def exact(scenario: Scenario, cfg: TaskAllocConfig | None = None) -> Allocation:
         raise ValueError(f"exact() enumerates; it takes at most {MAX_AGENTS} agents and {MAX_TASKS} tasks, "
                          f"got {scenario.n_agents} x {scenario.n_tasks}")
     cfg = cfg or TaskAllocConfig(n_agents=scenario.n_agents, n_tasks=scenario.n_tasks)
-    model = scoring_model(scenario, cfg)
+    model = ScoringModel.from_config(scenario, cfg)
     n, m = scenario.n_agents, scenario.n_tasks
     need = scenario.task_agents
     eq = scenario.agent_equipment.astype(np.int64)

@@ -1,6 +1,6 @@
 """Result rows → arrays, markdown tables, CSV files and PNG plots (shared by the compare command and the runner).
 
-A *row* is one episode (``training.evaluation.run_episode``). Rows of one cell (same point, same series) are
+A *row* is one episode (``evaluation.episodes.run_episode``). Rows of one cell (same point, same series) are
 sorted by seed, so cells of different series line up seed by seed for the paired statistics (spec cbga §6.2).
 """
 
@@ -18,7 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from training.stats import PairedComparison, format_mean_sd, format_p, paired
+from evaluation.stats import PairedComparison, format_mean_sd, format_p, paired
 
 METRIC_LABELS = {
     "score": "score", "valid_tasks": "valid tasks", "conflicts": "conflicts", "rounds": "rounds",

@@ -90,3 +90,8 @@ class MixedTeamPolicy(Policy):
         actions = self.learned.act(learned_obs, {a: (infos or {}).get(a, {}) for a in learned_obs})
         actions.update(self.scripted.act(observations, infos))
         return actions
+
+
+def with_teammates(policy: Policy, scripted_agents: Mapping[str, str] | None) -> Policy:
+    """``policy`` for every agent, or a mixed team when ``scripted_agents`` is non-empty."""
+    return MixedTeamPolicy(policy, scripted_agents) if scripted_agents else policy

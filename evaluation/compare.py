@@ -3,7 +3,7 @@
     python -m policies compare --scenario default --episodes 20 --out results/compare
 
 Rows: random, CBBA (only where every L_j = 1), CBGA, CBGA+TQ, CBGA+TB, CBGABI, the centralised greedy SGAMA
-(spec cbga §6.7; no rounds or messages) and, for every committed checkpoint ``models/*/model.zip`` whose
+(spec cbga §6.7; no rounds or messages) and, for every committed checkpoint ``models/<name>/model.json`` whose
 observation layout fits the scenario, the learned policy. Seed s is the same instance for every row (paired design,
 spec cbga §6.1). The table gives mean ± sd of the score (spec cbga §1.7), valid tasks, consensus rounds and
 messages received (``msgs / agent`` = messages / N_n, the thesis's per-agent communication steps), episodes that
@@ -23,10 +23,8 @@ from typing import Any
 
 import yaml
 
-from taskalloc_env import TaskAllocConfig, resolve_config
-from taskalloc_env.env import TaskAllocEnv
-from training.evaluation import Episode, default_jobs, policy_for, run_episodes, skip_reason, solver_name
-from training.report import (
+from evaluation.episodes import Episode, default_jobs, policy_for, run_episodes, skip_reason, solver_name
+from evaluation.report import (
     bar_and_differences,
     cell_text,
     compare_cells,
@@ -35,41 +33,44 @@ from training.report import (
     values,
     write_csv,
 )
-from training.stats import format_p, mean_sd
+from evaluation.stats import format_p, mean_sd
+from taskalloc_env import TaskAllocConfig, resolve_config, resources
+from taskalloc_env.env import TaskAllocEnv
 
-ROOT = Path(__file__).resolve().parent.parent
 BASELINES = ("random", "cbba", "cbga", "cbga+tq", "cbga+tb", "cbgabi", "sgama")
 REFERENCE = "CBGA"
 COLUMNS = (("score", "score"), ("valid_tasks", "valid tasks"), ("rounds", "rounds"), ("messages", "messages"),
            ("comm_steps", "msgs / agent"))
 
 
-def learned_checkpoints(root: Path = ROOT / "models") -> list[Path]:
-    """Committed checkpoints: ``models/<run>/model.zip``, in name order (relative to the repository when inside it,
-    so result files do not depend on where the checkout lives)."""
-    found = sorted(root.glob("*/model.zip")) if root.is_dir() else []
-    return [p.relative_to(ROOT) if p.is_relative_to(ROOT) else p for p in found]
+def learned_checkpoints() -> list[str]:
+    """The committed models (``models/<name>/model.json``) by name, in name order."""
+    return [name for name in resources.names("models", suffix="")
+            if (resources.folder("models") / name / "model.json").is_file()]
 
 
-def usable_learned(path: Path, cfg: TaskAllocConfig) -> tuple[str | None, str]:
+def usable_learned(source: str, cfg: TaskAllocConfig) -> tuple[str | None, str]:
     """(solver name, '') if the checkpoint loads and fits ``cfg``'s observations, else (None, why not)."""
-    solver = f"learned:{path}"
+    solver = f"learned:{source}"
     try:
         policy = policy_for(solver)
         env = TaskAllocEnv(cfg, **policy.env_overrides)
         env.reset(seed=0)
         policy.start(env, 0)
     except ImportError as exc:
-        return None, f"learned policy {path}: skipped, it needs the training extras ({exc})"
-    except (ValueError, FileNotFoundError, KeyError, RuntimeError) as exc:
-        return None, f"learned policy {path}: skipped, it does not fit this scenario ({exc})"
+        return None, f"learned policy {source}: skipped, it needs the learned extra: pip install taskalloc[learned] " \
+                     f"({exc})"
+    except ValueError as exc:
+        return None, f"learned policy {source}: skipped, it does not fit this scenario ({exc})"
     return solver, ""
 
 
 def display_name(solver: str) -> str:
     if solver.startswith("learned:"):
-        path = Path(solver.split(":", 1)[1])
-        return f"learned ({path.parent.name if path.name == 'model.zip' else path.stem})"
+        source = solver.split(":", 1)[1]
+        path = Path(source)
+        label = source if resources.is_name(source) else path.parent.name if path.name == "model.json" else path.stem
+        return f"learned ({label})"
     return solver_name(solver)
 
 
@@ -100,7 +101,7 @@ def summary(rows: Sequence[dict[str, Any]], order: Sequence[str]) -> tuple[str, 
 
 
 def compare(scenario: str, episodes: int, overrides: dict[str, Any], jobs: int = 1, out: Path | None = None,
-            learned: Sequence[Path] | None = None, progress: bool = False) -> str:
+            learned: Sequence[str] | None = None, progress: bool = False) -> str:
     """Run the comparison; returns the report text (also written to ``out`` when given)."""
     cfg = resolve_config(scenario, **overrides)
     notes, solvers = [], []
@@ -112,7 +113,7 @@ def compare(scenario: str, episodes: int, overrides: dict[str, Any], jobs: int =
             solvers.append(solver)
     checkpoints = learned_checkpoints() if learned is None else list(learned)
     if not checkpoints:
-        notes.append("learned policy: no committed checkpoint (models/<run>/model.zip), row left out.")
+        notes.append("learned policy: no committed model (models/<name>/model.json), row left out.")
     for path in checkpoints:
         solver, why = usable_learned(path, cfg)
         if solver:
@@ -163,8 +164,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="FIELD=VALUE", help="config override, e.g. --set agents_per_task=1 (repeatable)")
     parser.add_argument("--out", type=Path, default=None, help="write compare.md/.csv/.png and episodes.csv here")
     parser.add_argument("--jobs", type=int, default=1, help=f"worker processes (this machine: {default_jobs()})")
-    parser.add_argument("--learned", type=Path, action="append", default=None,
-                        help="checkpoint(s) to include (default: every models/<run>/model.zip)")
+    parser.add_argument("--learned", action="append", default=None, metavar="NAME_OR_PATH",
+                        help="a learned policy to include: a committed model's name or a checkpoint path "
+                             "(repeatable; default: every committed model in models/)")
     parser.add_argument("--no-learned", action="store_true", help="leave learned policies out")
     parser.add_argument("--progress", action="store_true", help="show a progress bar")
 

@@ -1,0 +1,540 @@
+"""Experiment runner: the seed experiments of spec cbga §6 as YAML files, run on paired seeds, with reports.
+
+    python -m evaluation.experiments run configs/experiments/fig5_16_l4.yaml [--episodes N] [--jobs N] [--quick]
+    python -m evaluation.experiments run --all            # every configs/experiments/*.yaml, updates docs/results.md
+    python -m evaluation.experiments report --all         # tables, plots and docs again from the saved CSVs
+    python -m evaluation.experiments list
+
+Each experiment runs every series on the same seeds 0..N−1 at every sweep point (paired design, spec cbga §6.1,
+[T5.3.1]) and writes to ``<out>/<name>/``: ``episodes.csv`` (one row per episode, non-converged ones included and
+flagged), ``table.md`` (mean ± sd per cell, paired figures against the baseline: Δ, ratio, paired t-test and
+Wilcoxon p-values, share of seeds won and tied; the published claims checked), one PNG per metric, a bar plot with
+per-seed differences at each headline point, ``config.yaml`` (the experiment and every resolved environment config)
+and ``run.json`` (package versions, commit, wall time). A full run also rewrites the experiment's block in
+``docs/results.md`` (between ``<!-- results:NAME:start/end -->`` markers; the text around the blocks is kept).
+``--quick`` runs 2 seeds at ≤ 3 sweep points into ``results/tmp/quick`` and leaves the docs alone.
+
+Experiment YAML keys: ``name``, ``title``, ``source``, ``scenario`` (scenario name or path), ``overrides`` (config
+fields), ``sweep`` (``{field, values, label}`` or ``{points: [mapping…], x, label}``; a point's ``label`` key names
+it), ``series`` (solver names or ``{solver, label, overrides}``), ``baseline`` (a series label), ``metrics``,
+``episodes``, ``headline`` (points to tabulate and bar-plot in the docs), ``published`` (markdown),
+``checks`` (``{claim, a, b, test: greater|less|same|ratio_above|ratio_below, metric, at, alpha, ratio}``),
+``quick`` (``{points: [...], episodes}``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import platform
+import re
+import resource
+import subprocess
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from evaluation.episodes import Episode, check_pairing, default_jobs, run_episodes, skip_reason, solver_name
+from evaluation.report import (
+    METRIC_DIGITS,
+    METRIC_LABELS,
+    PAIRED_HEADER,
+    bar_and_differences,
+    cell_text,
+    compare_cells,
+    markdown_table,
+    not_converged,
+    paired_columns,
+    read_csv,
+    sweep_plot,
+    write_csv,
+)
+from evaluation.stats import format_p
+from taskalloc_env import TaskAllocConfig, resolve_config
+from taskalloc_env.config import to_mapping
+
+ROOT = Path(__file__).resolve().parent.parent
+EXPERIMENT_DIR = ROOT / "configs" / "experiments"
+KEYS = {"name", "title", "source", "scenario", "overrides", "sweep", "series", "baseline", "metrics", "episodes",
+        "headline", "published", "checks", "quick"}
+TESTS = ("greater", "less", "same", "ratio_above", "ratio_below")
+PACKAGES = ("taskalloc", "numpy", "scipy", "pettingzoo", "gymnasium", "matplotlib", "pyyaml", "tqdm")
+
+
+@dataclasses.dataclass(frozen=True)
+class Series:
+    """One line of an experiment: a solver, a label, and config overrides of its own (e.g. L_j = 1 for CBBA)."""
+
+    label: str
+    solver: str
+    overrides: Mapping[str, Any]
+
+
+@dataclasses.dataclass(frozen=True)
+class Check:
+    """A published claim tested on our data: ``a`` against ``b`` (series labels) at the points ``at``."""
+
+    claim: str
+    a: str
+    b: str
+    test: str
+    metric: str = "score"
+    at: tuple[Mapping[str, Any], ...] = ()      # empty: every point
+    alpha: float = 0.01
+    ratio: float = 1.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Point:
+    """A sweep point: its label, its x value (for plots) and the config overrides it sets."""
+
+    label: str
+    x: Any
+    overrides: Mapping[str, Any]
+
+
+@dataclasses.dataclass
+class Experiment:
+    """One experiment file, parsed and validated."""
+
+    name: str
+    title: str
+    source: str
+    scenario: str
+    overrides: dict[str, Any]
+    xlabel: str
+    points: list[Point]
+    series: list[Series]
+    baseline: str | None
+    metrics: list[str]
+    episodes: int
+    headline: list[Point]
+    published: str
+    checks: list[Check]
+    quick_points: list[Point]
+    quick_episodes: int
+    raw: dict[str, Any]
+
+    def config(self, point: Point, series: Series) -> TaskAllocConfig:
+        """The environment config of one cell: scenario < experiment overrides < point < series."""
+        clash = set(point.overrides) & set(series.overrides)
+        if clash:
+            raise ValueError(f"{self.name}: series {series.label!r} and point {point.label!r} both set {sorted(clash)}")
+        scenario = self.scenario if Path(self.scenario).suffix not in (".yaml", ".yml") else ROOT / self.scenario
+        return resolve_config(scenario, **self.overrides, **point.overrides, **series.overrides)
+
+
+def _points(sweep: Mapping[str, Any] | None) -> tuple[list[Point], str]:
+    if not sweep:
+        return [Point("all", "all", {})], ""
+    if "field" in sweep:
+        field = sweep["field"]
+        points = [Point(_label(v), v, {field: v}) for v in sweep["values"]]
+        return points, sweep.get("label", field)
+    points = []
+    for entry in sweep["points"]:
+        entry = dict(entry)
+        label = str(entry.pop("label", None) or ", ".join(f"{k}={_label(v)}" for k, v in entry.items()))
+        x = entry.get(sweep["x"], label) if "x" in sweep else label
+        points.append(Point(label, x, entry))
+    return points, sweep.get("label", sweep.get("x", "point"))
+
+
+def _label(value: Any) -> str:
+    return "/".join(map(str, value)) if isinstance(value, (list, tuple)) else str(value)
+
+
+def _select(points: list[Point], wanted: Sequence[Any], where: str) -> list[Point]:
+    """Points matching ``wanted`` entries: a mapping of config values, or a point label."""
+    chosen = []
+    for want in wanted:
+        hits = [p for p in points if _matches(p, want)]
+        if not hits:
+            raise ValueError(f"{where}: {want!r} matches no sweep point ({[p.label for p in points]})")
+        chosen += [p for p in hits if p not in chosen]
+    return chosen
+
+
+def _matches(point: Point, want: Any) -> bool:
+    if isinstance(want, Mapping):
+        return all(point.overrides.get(k) == v for k, v in want.items())
+    return point.label == str(want)
+
+
+def load_experiment(path: str | Path) -> Experiment:
+    """Read and validate an experiment YAML (every cell's config is resolved, so bad fields fail here)."""
+    path = Path(path)
+    if not path.exists() and (EXPERIMENT_DIR / f"{path}.yaml").exists():
+        path = EXPERIMENT_DIR / f"{path}.yaml"
+    raw = yaml.safe_load(path.read_text()) or {}
+    unknown = set(raw) - KEYS
+    if unknown:
+        raise ValueError(f"{path}: unknown keys {sorted(unknown)}; known: {sorted(KEYS)}")
+    points, xlabel = _points(raw.get("sweep"))
+    series = []
+    for entry in raw.get("series", []):
+        entry = {"solver": entry} if isinstance(entry, str) else dict(entry)
+        label = entry.get("label") or solver_name(entry["solver"])
+        series.append(Series(label, entry["solver"], dict(entry.get("overrides") or {})))
+    labels = [s.label for s in series]
+    if not series or len(set(labels)) != len(labels):
+        raise ValueError(f"{path}: series need distinct labels, got {labels}")
+    baseline = raw.get("baseline")
+    checks = [Check(claim=c["claim"], a=c["a"], b=c["b"], test=c["test"], metric=c.get("metric", "score"),
+                    at=tuple(_as_list(c.get("at"))), alpha=float(c.get("alpha", 0.01)),
+                    ratio=float(c.get("ratio", 1.0))) for c in raw.get("checks", [])]
+    for name in [baseline] * (baseline is not None) + [x for c in checks for x in (c.a, c.b)]:
+        if name not in labels:
+            raise ValueError(f"{path}: {name!r} is not a series label ({labels})")
+    for c in checks:
+        if c.test not in TESTS:
+            raise ValueError(f"{path}: check test {c.test!r} is not one of {TESTS}")
+        _select(points, c.at, f"{path} check {c.claim!r}")
+    quick = raw.get("quick") or {}
+    quick_points = _select(points, quick["points"], f"{path} quick") if "points" in quick else \
+        [points[i] for i in sorted({0, len(points) // 2, len(points) - 1})]
+    exp = Experiment(
+        name=raw.get("name", path.stem), title=raw.get("title", path.stem), source=raw.get("source", ""),
+        scenario=str(raw.get("scenario", "default")), overrides=dict(raw.get("overrides") or {}), xlabel=xlabel,
+        points=points, series=series, baseline=baseline, metrics=list(raw.get("metrics", ["score"])),
+        episodes=int(raw.get("episodes", 100)), headline=_select(points, _as_list(raw.get("headline")), str(path)),
+        published=str(raw.get("published", "")).strip(), checks=checks, quick_points=quick_points,
+        quick_episodes=int(quick.get("episodes", 2)), raw=raw)
+    for point in points:
+        for s in series:
+            exp.config(point, s)
+    for metric in exp.metrics:
+        if metric not in METRIC_LABELS:
+            raise ValueError(f"{path}: unknown metric {metric!r}; known: {sorted(METRIC_LABELS)}")
+    return exp
+
+
+def _as_list(value: Any) -> list:
+    if value is None:
+        return []
+    return list(value) if isinstance(value, list) else [value]
+
+
+# -- running -------------------------------------------------------------------------------------------------------
+def plan(exp: Experiment, points: Sequence[Point], episodes: int) -> tuple[list[Episode], list[str]]:
+    """Every episode of the experiment (seeds innermost), and notes on cells skipped as not applicable."""
+    runs, skipped = [], []
+    for point in points:
+        for s in exp.series:
+            cfg = exp.config(point, s)
+            reason = skip_reason(s.solver, cfg)
+            if reason:
+                skipped.append(f"{s.label} at {exp.xlabel} = {point.label}: {reason}")
+                continue
+            labels = (("experiment", exp.name), ("point", point.label), ("series", s.label))
+            runs += [Episode(s.solver, cfg, seed, labels) for seed in range(episodes)]
+    return runs, skipped
+
+
+def run_experiment(exp: Experiment, out: Path, jobs: int, episodes: int | None = None, quick: bool = False,
+                   progress: bool = True, docs: Path | None = None) -> Path:
+    """Run ``exp`` and write every output under ``out / exp.name``; returns that directory."""
+    points = exp.quick_points if quick else exp.points
+    n = episodes or (exp.quick_episodes if quick else exp.episodes)
+    runs, skipped = plan(exp, points, n)
+    started, cpu = time.perf_counter(), _cpu_seconds()
+    rows = run_episodes(runs, jobs=jobs, progress=progress, desc=exp.name)
+    wall, cpu = time.perf_counter() - started, _cpu_seconds() - cpu
+    broken = check_pairing([r for r in rows if _same_generator(exp, r)], ["point"])
+    if broken:
+        raise RuntimeError(f"{exp.name}: paired seeds gave different instances: {broken[:3]}")
+    target = out / exp.name
+    target.mkdir(parents=True, exist_ok=True)
+    write_csv(target / "episodes.csv", rows)
+    (target / "config.yaml").write_text(yaml.safe_dump(_resolved(exp, points), sort_keys=False, allow_unicode=True))
+    info = {"experiment": exp.name, "episodes_per_cell": n, "points": [p.label for p in points], "jobs": jobs,
+            "quick": quick, "wall_seconds": round(wall, 1), "cpu_seconds": round(cpu, 1),
+            "episodes_total": len(rows),
+            "command": " ".join(["python -m evaluation.experiments", *sys.argv[1:]]) if sys.argv else "",
+            "skipped": skipped, **environment_info()}
+    (target / "run.json").write_text(json.dumps(info, indent=2) + "\n")
+    write_reports(exp, rows, target, points, docs=docs)
+    return target
+
+
+def _cpu_seconds() -> float:
+    """CPU time of this process and of its finished worker processes (user + system)."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+def _same_generator(exp: Experiment, row: Mapping[str, Any]) -> bool:
+    """Rows whose instances must match seed by seed: series without config overrides of their own."""
+    return not next(s for s in exp.series if s.label == row["series"]).overrides
+
+
+def _resolved(exp: Experiment, points: Sequence[Point]) -> dict[str, Any]:
+    cells = {f"{p.label} | {s.label}": {"solver": s.solver, "config": to_mapping(exp.config(p, s))}
+             for p in points for s in exp.series}
+    return {"experiment": exp.raw, "resolved": cells}
+
+
+def environment_info() -> dict[str, Any]:
+    """Python, platform, package versions and the git commit (with a dirty flag) the results came from."""
+    versions = {}
+    for name in PACKAGES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    try:
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True,
+                                check=True).stdout.strip()
+        dirty = bool(subprocess.run(["git", "status", "--porcelain"], cwd=ROOT, capture_output=True,
+                                    text=True).stdout.strip())
+    except (OSError, subprocess.CalledProcessError):
+        commit, dirty = None, None
+    return {"python": platform.python_version(), "platform": platform.platform(), "packages": versions,
+            "git_commit": commit, "git_dirty": dirty}
+
+
+# -- reports -------------------------------------------------------------------------------------------------------
+def cells_of(rows: Sequence[Mapping[str, Any]]) -> dict[tuple[str, str], list[Mapping[str, Any]]]:
+    """Rows grouped by (point label, series label)."""
+    cells: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
+    for row in rows:
+        cells.setdefault((str(row["point"]), str(row["series"])), []).append(row)
+    return cells
+
+
+def metric_table(exp: Experiment, cells: Mapping, points: Sequence[Point], metric: str) -> str:
+    """Rows: sweep points; columns: series; cells: mean ± sd (``k nc`` = k episodes did not converge)."""
+    present = [s.label for s in exp.series if any((p.label, s.label) in cells for p in points)]
+    body = [[p.label, *(cell_text(cells[(p.label, s)], metric) if (p.label, s) in cells else "n/a"
+                        for s in present)] for p in points]
+    return markdown_table([exp.xlabel or "setting", *present], body)
+
+
+def paired_table(exp: Experiment, cells: Mapping, points: Sequence[Point], metric: str = "score") -> str:
+    """Every series against the baseline at each point: mean ± sd, Δ, ratio, p-values, share won and tied."""
+    header = [exp.xlabel or "setting", "series", METRIC_LABELS[metric], *PAIRED_HEADER, "not conv."]
+    body = []
+    for p in points:
+        base = cells.get((p.label, exp.baseline))
+        for s in exp.series:
+            cell = cells.get((p.label, s.label))
+            if cell is None:
+                continue
+            paired_cols = ["–"] * len(PAIRED_HEADER)
+            if base is not None and s.label != exp.baseline:
+                paired_cols = paired_columns(compare_cells(cell, base, metric), METRIC_DIGITS.get(metric, 1))
+            body.append([p.label, s.label, cell_text(cell, metric), *paired_cols, not_converged(cell)])
+    return markdown_table(header, body, align="ll" + "r" * (len(header) - 2))
+
+
+def evaluate_check(check: Check, cells: Mapping, points: Sequence[Point]) -> tuple[str, str]:
+    """(observed figures, verdict) of one published claim; ``n/a`` where the cells were not run."""
+    chosen = [p for p in points if not check.at or any(_matches(p, want) for want in check.at)]
+    observed, verdicts = [], []
+    for p in chosen:
+        a, b = cells.get((p.label, check.a)), cells.get((p.label, check.b))
+        if a is None or b is None:
+            continue
+        pc = compare_cells(a, b, check.metric)
+        ok = {"greater": pc.mean_diff > 0 and pc.p_t < check.alpha,
+              "less": pc.mean_diff < 0 and pc.p_t < check.alpha,
+              "same": not pc.p_t < check.alpha,
+              "ratio_above": pc.ratio >= check.ratio,
+              "ratio_below": pc.ratio < check.ratio}[check.test]
+        verdicts.append(ok)
+        digits = METRIC_DIGITS.get(check.metric, 1)
+        if len(chosen) > 1:     # the per-point details are in the tables; keep the claim's row short
+            observed.append(f"{p.label}: ×{pc.ratio:.3f}, p {format_p(pc.p_t)}")
+        else:
+            observed.append(f"Δ {pc.mean_diff:+.{digits}f} (×{pc.ratio:.3f}), p {format_p(pc.p_t)}, "
+                            f"higher on {100 * pc.better:.0f} % of seeds")
+    if not verdicts:
+        return "not run", "n/a"
+    verdict = "yes" if all(verdicts) else ("no" if not any(verdicts) else f"partly ({sum(verdicts)}/{len(verdicts)})")
+    return "; ".join(observed), verdict
+
+
+def checks_table(exp: Experiment, cells: Mapping, points: Sequence[Point]) -> str:
+    body = [[c.claim, *evaluate_check(c, cells, points)] for c in exp.checks]
+    return markdown_table(["published claim", "ours", "reproduced"], body, align="llc")
+
+
+def write_reports(exp: Experiment, rows: Sequence[Mapping[str, Any]], target: Path, points: Sequence[Point],
+                  docs: Path | None = None) -> None:
+    """table.md and the PNGs from ``rows``; with ``docs``, the experiment's block of the results page."""
+    cells = cells_of(rows)
+    points = [p for p in points if any((p.label, s.label) in cells for s in exp.series)]
+    headline = [p for p in exp.headline if p in points]
+    seeds_run = max((len(c) for c in cells.values()), default=0)
+    figures = []
+    if len(points) > 1:
+        for metric in exp.metrics:
+            series = {s.label: [cells.get((p.label, s.label), []) for p in points] for s in exp.series}
+            sweep_plot(target / f"{metric}.png", [p.x for p in points], series, metric, exp.xlabel,
+                       f"{exp.title}\n{METRIC_LABELS[metric]}, {seeds_run} paired seeds per point")
+            figures.append(f"{metric}.png")
+    for p in headline or ([] if len(points) > 1 else points):
+        name = "headline.png" if len(points) == 1 else f"headline_{_slug(p.label)}.png"
+        present = {s.label: cells[(p.label, s.label)] for s in exp.series if (p.label, s.label) in cells}
+        title = f"{exp.xlabel} = {p.label}" if exp.xlabel else exp.title
+        bar_and_differences(target / name, present, exp.baseline, "score", f"{title}: score, {seeds_run} seeds")
+        figures.append(name)
+    skipped = json.loads((target / "run.json").read_text()).get("skipped", []) if (target / "run.json").exists() \
+        else []
+    sections = [f"# {exp.title}\n", f"Source: {exp.source}. {seeds_run} paired seeds per cell.\n"]
+    for metric in exp.metrics:
+        sections.append(f"## {METRIC_LABELS[metric]} (mean ± sd)\n\n" + metric_table(exp, cells, points, metric))
+    if exp.baseline:
+        sections.append(f"## Paired against {exp.baseline} (score)\n\n" + paired_table(exp, cells, points))
+    if exp.checks:
+        sections.append("## Published claims\n\n" + checks_table(exp, cells, points))
+    sections.append(_convergence_note(rows, skipped))
+    sections.append("\n".join(f"![{f}]({f})" for f in figures) + "\n")
+    (target / "table.md").write_text("\n".join(sections))
+    if docs is not None:
+        block = _docs_block(exp, cells, points, headline, figures, target, docs, rows, skipped)
+        update_docs(docs, exp.name, exp.title, block)
+
+
+def _convergence_note(rows: Sequence[Mapping[str, Any]], skipped: Sequence[str]) -> str:
+    bad = not_converged(rows)
+    note = (f"Not converged within the round bound: {bad} of {len(rows)} episodes (kept in every figure, marked "
+            "`nc` per cell)." if bad else f"Every one of the {len(rows)} episodes converged.")
+    if skipped:
+        note += " Not applicable, not run: " + "; ".join(sorted(set(skipped))) + "."
+    return note + "\n"
+
+
+def _docs_block(exp: Experiment, cells: Mapping, points: Sequence[Point], headline: Sequence[Point],
+                figures: Sequence[str], target: Path, docs: Path, rows: Sequence[Mapping[str, Any]],
+                skipped: Sequence[str]) -> str:
+    seeds_run = max((len(c) for c in cells.values()), default=0)
+    rel = Path(_relpath(target, docs.parent))
+    setting = ", ".join(f"{k} = {_label(v)}" for k, v in exp.overrides.items())
+    parts = [f"*Source: {exp.source}. Scenario `{exp.scenario}`{', ' + setting if setting else ''}; "
+             f"{seeds_run} paired seeds per cell (seeds 0–{seeds_run - 1}). Regenerate: "
+             f"`python -m evaluation.experiments run configs/experiments/{exp.name}.yaml`. "
+             f"Full tables: [{rel}/table.md]({rel}/table.md), per-episode data: `{rel}/episodes.csv`.*\n"]
+    if exp.published:
+        parts.append(f"**Published:** {exp.published}\n")
+    for metric in exp.metrics:
+        parts.append(f"**Ours, {METRIC_LABELS[metric]}** (mean ± sd):\n\n" + metric_table(exp, cells, points, metric))
+    if exp.baseline and headline:
+        parts.append(f"**Ours, paired against {exp.baseline}** at the headline setting:\n\n"
+                     + paired_table(exp, cells, headline))
+    if exp.checks:
+        parts.append("**Published claims on our data:**\n\n" + checks_table(exp, cells, points))
+    parts.append(_convergence_note(rows, skipped))
+    parts.append(" ".join(f"![{exp.name} {f}]({rel}/{f})" for f in figures) + "\n")
+    return "\n".join(parts)
+
+
+def _relpath(path: Path, start: Path) -> str:
+    return os.path.relpath(path.resolve(), start.resolve())
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9]+", "_", text).strip("_") or "point"
+
+
+def update_docs(docs: Path, name: str, title: str, block: str) -> None:
+    """Replace the text between the ``name`` markers in ``docs`` (append a ``title`` section if they are missing)."""
+    start, end = f"<!-- results:{name}:start -->", f"<!-- results:{name}:end -->"
+    text = docs.read_text() if docs.exists() else "# Results\n"
+    generated = f"{start}\n{block}{end}"
+    if start in text and end in text:
+        head, rest = text.split(start, 1)
+        text = head + generated + rest.split(end, 1)[1]
+    else:
+        text = text.rstrip("\n") + f"\n\n## {title}\n\n{generated}\n"
+    docs.parent.mkdir(parents=True, exist_ok=True)
+    docs.write_text(text)
+
+
+def report_experiment(exp: Experiment, out: Path, docs: Path | None) -> None:
+    """Tables, plots and docs again from ``<out>/<name>/episodes.csv`` (no episodes are run)."""
+    target = out / exp.name
+    rows = read_csv(target / "episodes.csv")
+    labels = {str(r["point"]) for r in rows}
+    write_reports(exp, rows, target, [p for p in exp.points if p.label in labels], docs=docs)
+
+
+# -- command line --------------------------------------------------------------------------------------------------
+def experiment_paths(paths: Sequence[str], every: bool) -> list[Path]:
+    if every:
+        return sorted(EXPERIMENT_DIR.glob("*.yaml"))
+    if not paths:
+        raise SystemExit("name experiment files, or pass --all")
+    return [Path(p) for p in paths]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m evaluation.experiments", description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="run experiments and write their results")
+    report = sub.add_parser("report", help="rewrite tables, plots and docs from saved episodes.csv files")
+    sub.add_parser("list", help="list the experiment files")
+    for p in (run, report):
+        p.add_argument("paths", nargs="*", help="experiment YAML files (or names in configs/experiments)")
+        p.add_argument("--all", action="store_true", help="every configs/experiments/*.yaml")
+        p.add_argument("--out", type=Path, default=None, help="results directory (default results/, "
+                                                               "results/tmp/quick with --quick)")
+        p.add_argument("--docs", type=Path, default=ROOT / "docs" / "results.md", help="results page to update")
+        p.add_argument("--no-docs", action="store_true", help="leave the results page alone")
+    run.add_argument("--episodes", type=int, default=None, help="seeds per cell (default: the file's, 100)")
+    run.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes (default: all cores)")
+    run.add_argument("--quick", action="store_true", help="2 seeds at <= 3 points, into results/tmp/quick")
+    run.add_argument("--no-progress", action="store_true")
+    args = parser.parse_args(argv)
+    if args.command == "list":
+        for path in sorted(EXPERIMENT_DIR.glob("*.yaml")):
+            exp = load_experiment(path)
+            print(f"{path.relative_to(ROOT)}  {exp.title}")
+        return 0
+    quick = args.command == "run" and args.quick
+    out = args.out or (ROOT / "results" / "tmp" / "quick" if quick else ROOT / "results")
+    docs = None if args.no_docs or (quick and "--docs" not in (argv or sys.argv)) else args.docs
+    experiments = [load_experiment(p) for p in experiment_paths(args.paths, args.all)]
+    started = time.perf_counter()
+    for exp in experiments:
+        if args.command == "report":
+            report_experiment(exp, out, docs)
+            continue
+        t0 = time.perf_counter()
+        target = run_experiment(exp, out, args.jobs, args.episodes, quick, not args.no_progress, docs)
+        print(f"{exp.name}: {time.perf_counter() - t0:.1f} s -> {target.relative_to(out.parent)}/table.md")
+    print(f"total {time.perf_counter() - started:.1f} s")
+    if docs is not None and args.all:
+        update_docs(docs, "suite", "Run summary", suite_block(experiments, out, docs))
+    return 0
+
+
+def suite_block(experiments: Sequence[Experiment], out: Path, docs: Path) -> str:
+    """The run summary of every experiment (episodes, wall and CPU time, jobs, commit) from the run.json files."""
+    body, wall, cpu = [], 0.0, 0.0
+    info: dict[str, Any] = {}
+    for exp in experiments:
+        path = out / exp.name / "run.json"
+        if not path.exists():
+            continue
+        info = json.loads(path.read_text())
+        wall, cpu = wall + info["wall_seconds"], cpu + info.get("cpu_seconds", 0.0)
+        rel = _relpath(out / exp.name, docs.parent)
+        body.append([f"[{exp.name}]({rel}/table.md)", info["episodes_per_cell"], info["episodes_total"],
+                     f"{info['wall_seconds']:.0f}", f"{info.get('cpu_seconds', 0.0):.0f}", info["jobs"]])
+    body.append(["**total**", "", sum(int(r[2]) for r in body), f"{wall:.0f}", f"{cpu:.0f}", ""])
+    packages = ", ".join(f"{k} {v}" for k, v in info.get("packages", {}).items())
+    return (markdown_table(["experiment", "seeds per cell", "episodes", "wall s", "CPU s", "jobs"], body)
+            + f"\nPython {info.get('python')}, {packages}; commit `{info.get('git_commit')}`"
+            + (" (with uncommitted changes)" if info.get("git_dirty") else "") + f"; {info.get('platform')}.\n")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,124 @@
+"""The table of ``docs/learning.md``: baselines, centralised solvers and learned checkpoints on held-out seeds.
+
+    python -m evaluation.heldout                                   # print the table (seeds 10000..10099)
+    python -m evaluation.heldout --update-doc docs/learning.md     # also rewrite the table in the doc
+
+Rows: random, CBGA, CBGABI (scripted, decentralised), SGAMA (centralised greedy), the exact optimum, and every
+``--learned LABEL=PATH`` checkpoint (default: the committed behaviour-cloning, PPO-from-scratch and BC + PPO
+models: ``models/train_small_bc/bc.json``, ``train_small`` and ``train_small_bc``).
+Each policy runs in an environment built with its ``env_overrides``; seed s is the same instance for
+every row (the instance is drawn at ``reset(seed=s)`` before any policy acts). Learned policies act greedily
+(arg-max of the masked logits).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from evaluation.episodes import Episode, run_episode, skip_reason
+from evaluation.seeds import TEST_SEEDS
+from evaluation.stats import format_mean_sd, format_p, paired
+from taskalloc_env import resources
+from taskalloc_env.config import resolve_config
+
+DEFAULT_LEARNED = (
+    ("behaviour cloning (CBGABI)", str(resources.folder("models") / "train_small_bc" / "bc.json")),
+    ("PPO from scratch", "train_small"),
+    ("BC + PPO", "train_small_bc"),
+)
+SCRIPTED = (("random", "random"), ("CBGA", "cbga"), ("CBGABI", "cbgabi"))
+CENTRALISED = (("SGAMA (centralised greedy)", "sgama"), ("exact optimum", "exact"))
+BEGIN, END = "<!-- learning-table:begin -->", "<!-- learning-table:end -->"
+
+
+def run_rows(scenario: str, seeds: Sequence[int], learned: Sequence[tuple[str, str]]) -> list[dict[str, Any]]:
+    """One record per row: label, per-seed scores and mean figures, and the seconds it took.
+
+    Each episode goes through ``evaluation.episodes.run_episode``, the experiment runner's paired evaluation."""
+    cfg = resolve_config(scenario)
+    solvers = [(label, name, "policy") for label, name in SCRIPTED]
+    solvers += [(label, name, "solver") for label, name in CENTRALISED]
+    solvers += [(label, f"learned:{path}", "policy") for label, path in learned]
+    rows = []
+    for label, solver, kind in solvers:
+        t0 = time.perf_counter()
+        reason = skip_reason(solver, cfg)
+        try:
+            if reason:
+                raise ValueError(reason)
+            episodes = [run_episode(Episode(solver, cfg, int(seed))) for seed in seeds]
+        except ValueError as exc:       # the exact solver refuses large instances; a learned MLP other sizes
+            print(f"{label}: skipped ({exc})", flush=True)
+            continue
+        rows.append({"label": label, "kind": kind, "seconds": round(time.perf_counter() - t0, 1),
+                     "scores": [e["score"] for e in episodes],
+                     **{m: float(np.mean([e[m] or 0 for e in episodes])) for m in ("valid_tasks", "rounds",
+                                                                                    "messages")}})
+        print(f"{label}: {np.mean(rows[-1]['scores']):.1f} ({rows[-1]['seconds']} s)", flush=True)
+    return rows
+
+
+def markdown(rows: Sequence[dict[str, Any]], seeds: Sequence[int]) -> str:
+    """Mean ± sd score, % of CBGABI and of the optimum, the paired comparison with CBGABI, protocol figures."""
+    by_label = {r["label"]: np.asarray(r["scores"]) for r in rows}
+    ref = by_label["CBGABI"]
+    opt = by_label["exact optimum"].mean() if "exact optimum" in by_label else float("nan")
+    lines = [f"Held-out seeds {seeds[0]}–{seeds[-1]} ({len(seeds)} instances). Δ: paired mean difference to CBGABI "
+             "with its 95 % t-interval; p: paired t-test; wins / ties: share of seeds above / equal to CBGABI.", "",
+             "| policy | score (mean ± sd) | % of CBGABI | % of optimum | Δ vs CBGABI (95 % CI) | p | wins | ties "
+             "| valid tasks | rounds | messages |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        s = by_label[r["label"]]
+        pc = paired(s, ref)
+        protocol = f"{r['rounds']:.2f} | {r['messages']:.1f}" if r["kind"] == "policy" else "– | –"
+        of_opt = "–" if np.isnan(opt) else f"{100 * s.mean() / opt:.1f} %"
+        lines.append(f"| {r['label']} | {format_mean_sd(s, 1)} | {100 * pc.ratio:.1f} % | {of_opt} "
+                     f"| {pc.mean_diff:+.1f} [{pc.ci95[0]:+.1f}, {pc.ci95[1]:+.1f}] | {format_p(pc.p_t)} "
+                     f"| {100 * pc.better:.0f} % | {100 * pc.tied:.0f} % | {r['valid_tasks']:.2f} | {protocol} |")
+    return "\n".join(lines)
+
+
+def update_doc(path: Path, table: str) -> None:
+    """Replace the text between the table markers of ``path``."""
+    text = path.read_text()
+    if BEGIN not in text or END not in text:
+        raise SystemExit(f"{path} has no {BEGIN} … {END} block to update")
+    block = f"{BEGIN}\n{table}\n{END}"
+    path.write_text(re.sub(re.escape(BEGIN) + ".*?" + re.escape(END), lambda _: block, text, flags=re.S))
+
+
+def main(argv: list[str] | None = None) -> str:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenario", default="train_small")
+    parser.add_argument("--seed-start", type=int, default=TEST_SEEDS.start)
+    parser.add_argument("--episodes", type=int, default=len(TEST_SEEDS))
+    parser.add_argument("--learned", action="append", metavar="LABEL=PATH",
+                        help="a checkpoint row (repeatable); default: the committed models")
+    parser.add_argument("--json", type=Path, help="also write per-seed scores here")
+    parser.add_argument("--update-doc", type=Path, help="rewrite the table block of this markdown file")
+    args = parser.parse_args(argv)
+    seeds = list(range(args.seed_start, args.seed_start + args.episodes))
+    learned = [tuple(item.split("=", 1)) for item in args.learned] if args.learned else \
+        list(DEFAULT_LEARNED)
+    rows = run_rows(args.scenario, seeds, learned)
+    table = markdown(rows, seeds)
+    print(table)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({"seeds": seeds, "rows": rows}, indent=1))
+    if args.update_doc:
+        update_doc(args.update_doc, table)
+    return table
+
+
+if __name__ == "__main__":
+    main()

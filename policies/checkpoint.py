@@ -1,0 +1,280 @@
+"""Checkpoints of learned policies with no executable content: JSON for the architecture, safetensors for weights.
+
+A checkpoint is two files with one stem, ``<stem>.json`` and ``<stem>.safetensors`` (``models/train_small/model``):
+
+* the JSON names the actor class (one of ``policies.networks.NETWORKS``) and its integer sizes, the observation
+  features it was trained on (checked against the environment's layout before acting), the protocol options the
+  policy needs from the environment (``env_overrides``) and free-form metadata (plain JSON values only);
+* the safetensors file holds the actor's weights, tensors only.
+
+Loading parses JSON and tensors, builds a known class from integers and loads the weights strictly; nothing in the
+files is executed. A stable-baselines3 ``.zip`` is different: SB3's loader unpickles its ``data`` entries, so a
+crafted zip runs code. ``load`` refuses zips unless ``allow_pickle=True`` (with a warning); ``convert_sb3_zip``
+turns a zip trained by this project into a checkpoint while reading only its JSON entries and its weights, which
+torch reads with ``weights_only=True``.
+
+    python -m policies.checkpoint convert runs/old/model.zip models/mine/model
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import inspect
+import io
+import json
+import warnings
+import zipfile
+from collections.abc import Mapping, Sequence
+from importlib.resources.abc import Traversable
+from pathlib import Path
+from typing import Any
+
+FORMAT, VERSION = "taskalloc-checkpoint", 1
+MAX_JSON_BYTES = 1 << 20
+MAX_SIZE = 1 << 16              # largest integer size a network may be built with
+MAX_PARAMETERS = 50_000_000     # largest actor a checkpoint may describe (refused before anything is allocated)
+# config fields that describe the consensus protocol rather than the scenario (taskalloc_env.config docstring)
+PROTOCOL_FIELDS = ("cbba_table", "prereq_mode", "release_order", "task_quitting", "delta", "reset_on", "quit_block",
+                   "require_known_capacity", "consensus", "max_bundle", "max_rounds")
+
+
+class CheckpointError(ValueError):
+    """A checkpoint is missing, malformed, or asks for something outside what may be loaded."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Checkpoint:
+    """A loaded checkpoint: the actor network and what the JSON says about it."""
+
+    actor: Any                              # torch.nn.Module of a class in NETWORKS, in eval mode
+    network: str
+    own_features: tuple[str, ...]
+    task_features: tuple[str, ...]
+    env_overrides: dict[str, Any]
+    meta: dict[str, Any]
+
+
+def save(stem: str | Path, actor: Any, own_features: Sequence[str], task_features: Sequence[str],
+         env_overrides: Mapping[str, Any], meta: Mapping[str, Any] | None = None) -> Path:
+    """Write ``<stem>.json`` and ``<stem>.safetensors``; returns the JSON path."""
+    from safetensors.torch import save_file
+
+    from policies.networks import NETWORKS
+
+    if type(actor) not in NETWORKS.values():
+        raise CheckpointError(f"{type(actor).__name__} is not a known network class ({sorted(NETWORKS)})")
+    unknown = sorted(set(env_overrides) - set(PROTOCOL_FIELDS))
+    if unknown:
+        raise CheckpointError(f"env_overrides {unknown} are not protocol options ({', '.join(PROTOCOL_FIELDS)})")
+    stem = Path(stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    spec = {"format": FORMAT, "version": VERSION,
+            "network": {"class": actor.name, "config": actor.config()},
+            "observation": {"own_features": list(own_features), "task_features": list(task_features)},
+            "env_overrides": dict(env_overrides), "meta": dict(meta or {})}
+    text = json.dumps(spec, indent=1, sort_keys=False)     # fails on anything that is not plain JSON
+    save_file({k: v.detach().cpu().contiguous() for k, v in actor.state_dict().items()},
+              str(stem.with_suffix(".safetensors")))
+    stem.with_suffix(".json").write_text(text + "\n")
+    return stem.with_suffix(".json")
+
+
+def load(source: str | Path | Traversable, allow_pickle: bool = False) -> Checkpoint:
+    """Load a checkpoint: ``<stem>.json`` (or its stem, or a folder holding ``model.json``).
+
+    With ``allow_pickle=True`` an SB3 ``.zip`` is loaded through SB3's own loader, which unpickles and can run
+    code from the file: only for files you trust.
+    """
+    if isinstance(source, (str, Path)):
+        source = Path(source)
+        if source.suffix == ".zip":
+            return _load_sb3_zip(source, allow_pickle)
+        if source.is_dir():
+            source = source / "model.json"
+        elif source.suffix != ".json":
+            source = source.with_name(source.name + ".json")
+    spec = _read_spec(source)
+    weights = source.parent / (source.name[: -len(".json")] + ".safetensors") if isinstance(source, Path) else \
+        _sibling(source, ".safetensors")
+    return _build(spec, _read_weights(weights), str(source))
+
+
+def _sibling(source: Traversable, suffix: str) -> Traversable:
+    name = source.name[: -len(".json")] + suffix
+    parent = getattr(source, "parent", None)
+    if parent is None:
+        raise CheckpointError(f"cannot locate the weights next to {source}")
+    return parent / name
+
+
+def _read_spec(source: Path | Traversable) -> dict[str, Any]:
+    try:
+        raw = source.read_bytes()
+    except (OSError, FileNotFoundError) as exc:
+        raise CheckpointError(f"no checkpoint at {str(source)!r} ({exc.strerror or exc})") from None
+    if len(raw) > MAX_JSON_BYTES:
+        raise CheckpointError(f"{source}: {len(raw)} bytes is too large for a checkpoint description")
+    try:
+        spec = json.loads(raw)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CheckpointError(f"{source}: not a JSON checkpoint description ({exc})") from None
+    if not isinstance(spec, dict) or spec.get("format") != FORMAT:
+        raise CheckpointError(f"{source}: not a {FORMAT} file")
+    if spec.get("version") != VERSION:
+        raise CheckpointError(f"{source}: checkpoint version {spec.get('version')!r}; this code reads {VERSION}")
+    return spec
+
+
+def _read_weights(source: Path | Traversable) -> dict[str, Any]:
+    from safetensors import SafetensorError
+    from safetensors.torch import load
+
+    try:
+        return load(source.read_bytes())
+    except (OSError, FileNotFoundError) as exc:
+        raise CheckpointError(f"no weights at {str(source)!r} ({exc.strerror or exc})") from None
+    except SafetensorError as exc:
+        raise CheckpointError(f"{source}: not a safetensors file ({exc})") from None
+
+
+def _build(spec: Mapping[str, Any], weights: Mapping[str, Any], where: str) -> Checkpoint:
+    from policies.networks import NETWORKS, count_parameters
+
+    network = spec.get("network")
+    if not isinstance(network, dict) or network.get("class") not in NETWORKS:
+        raise CheckpointError(f"{where}: network class {network!r} is not one of {sorted(NETWORKS)}")
+    cls = NETWORKS[network["class"]]
+    config = network.get("config")
+    accepted = [p for p in inspect.signature(cls.__init__).parameters if p != "self"]
+    if not isinstance(config, dict) or set(config) - set(accepted):
+        raise CheckpointError(f"{where}: network config {config!r} must be a mapping with keys among {accepted}")
+    for key, value in config.items():
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_SIZE:
+            raise CheckpointError(f"{where}: network config {key}={value!r} is not an integer in 1..{MAX_SIZE}")
+    expected = sum(int(v.numel()) for v in weights.values())
+    if expected > MAX_PARAMETERS:
+        raise CheckpointError(f"{where}: {expected} weights exceed the limit of {MAX_PARAMETERS}")
+    actor = cls(**config)
+    if count_parameters(actor) > MAX_PARAMETERS:
+        raise CheckpointError(f"{where}: the network would have more than {MAX_PARAMETERS} weights")
+    try:
+        actor.load_state_dict(dict(weights), strict=True)
+    except RuntimeError as exc:
+        raise CheckpointError(f"{where}: the weights do not fit {network['class']} {config}: "
+                              f"{str(exc).splitlines()[0]}") from None
+    actor.eval()
+    observation = spec.get("observation") or {}
+    own, task = observation.get("own_features"), observation.get("task_features")
+    if not (_names(own) and _names(task)):
+        raise CheckpointError(f"{where}: observation.own_features and .task_features must be lists of names")
+    overrides = spec.get("env_overrides") or {}
+    if not isinstance(overrides, dict) or set(overrides) - set(PROTOCOL_FIELDS):
+        raise CheckpointError(f"{where}: env_overrides {overrides!r} may only set {', '.join(PROTOCOL_FIELDS)}")
+    meta = spec.get("meta") or {}
+    if not isinstance(meta, dict):
+        raise CheckpointError(f"{where}: meta must be a mapping")
+    return Checkpoint(actor, network["class"], tuple(own), tuple(task), dict(overrides), meta)
+
+
+def _names(value: Any) -> bool:
+    return isinstance(value, list) and all(isinstance(v, str) for v in value)
+
+
+# -- stable-baselines3 zips ------------------------------------------------------------------------------------------
+def _zip_json_and_weights(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The ``data`` JSON (as text, nothing unpickled) and the ``policy.pth`` state dict (``weights_only``)."""
+    import torch as th
+
+    try:
+        with zipfile.ZipFile(path) as archive:
+            data = json.loads(archive.read("data"))
+            state = th.load(io.BytesIO(archive.read("policy.pth")), map_location="cpu", weights_only=True)
+    except (OSError, KeyError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
+        raise CheckpointError(f"{path}: not a stable-baselines3 checkpoint ({exc})") from None
+    return data, state
+
+
+def sb3_zip_to_checkpoint(path: Path) -> Checkpoint:
+    """Read a zip written by this project's SB3 training without unpickling anything (see the module docstring)."""
+    data, state = _zip_json_and_weights(path)
+    return _from_sb3(data.get("policy_kwargs"), state, data.get("taskalloc"), str(path))
+
+
+def _from_sb3(policy_kwargs: Any, state: Mapping[str, Any], taskalloc: Any, where: str) -> Checkpoint:
+    """The actor of an SB3 policy of this project (``training.sb3_policy``) from its kwargs and state dict."""
+    from policies.networks import MlpActor, PoolingActor
+    from taskalloc_env.observation import OWN_FEATURES, TASK_FEATURES
+
+    kwargs = policy_kwargs if isinstance(policy_kwargs, dict) else {}
+    body, hidden = kwargs.get("body", "pooling"), kwargs.get("hidden", 64)
+    prefix = "mlp_extractor."
+    actor_state = {k[len(prefix):].removeprefix("pi."): v for k, v in state.items()
+                   if k.startswith(prefix) and not k.startswith(prefix + "critic.")}
+    try:
+        if body == "pooling":
+            task_size = int(kwargs.get("task_size", len(TASK_FEATURES)))
+            own_size = int(actor_state["actor.encode.0.weight"].shape[1]) - task_size
+            config = {"own_size": own_size, "task_size": task_size, "hidden": int(hidden)}
+            network, n_equipment = PoolingActor.name, own_size - len(OWN_FEATURES)
+        elif body == "mlp":
+            first, last = actor_state["actor.0.weight"], actor_state["actor.4.weight"]
+            config = {"obs_size": int(first.shape[1]), "n_actions": int(last.shape[0]), "hidden": int(hidden)}
+            network = MlpActor.name
+            n_equipment = int(first.shape[1]) - len(OWN_FEATURES) - (int(last.shape[0]) - 1) // 2 * len(TASK_FEATURES)
+        else:
+            raise CheckpointError(f"{where}: unknown body {body!r} in policy_kwargs")
+    except KeyError as exc:
+        raise CheckpointError(f"{where}: not a policy of this project (no weight {exc})") from None
+    meta = taskalloc if isinstance(taskalloc, dict) else {}
+    overrides = {k: v for k, v in (meta.get("env_overrides") or {}).items() if k in PROTOCOL_FIELDS}
+    spec = {"network": {"class": network, "config": config},
+            "observation": {"own_features": [*OWN_FEATURES, *(f"equipment_{e}" for e in range(n_equipment))],
+                            "task_features": list(TASK_FEATURES)},
+            "env_overrides": overrides,
+            "meta": {k: v for k, v in meta.items() if k != "env_overrides"}}
+    return _build(spec, actor_state, where)
+
+
+def _load_sb3_zip(path: Path, allow_pickle: bool) -> Checkpoint:
+    if not allow_pickle:
+        raise CheckpointError(
+            f"{path} is a stable-baselines3 zip: its entries are pickles, and SB3's loader runs whatever code they "
+            f"name. Convert it without unpickling (`python -m policies.checkpoint convert {path} OUT`), or pass "
+            "allow_pickle=True (CLI: --allow-pickle) to load it with SB3's loader if you trust the file")
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    warnings.warn(f"allow_pickle=True: SB3's loader unpickles {path}, which runs any code the file names; "
+                  "load only files you trust, and convert them with `python -m policies.checkpoint convert`",
+                  stacklevel=3)
+    data, params, _ = load_from_zip_file(path, device="cpu")
+    return _from_sb3(data.get("policy_kwargs"), params["policy"], data.get("taskalloc"), str(path))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m policies.checkpoint", description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    convert = sub.add_parser("convert", help="an SB3 zip of this project → a checkpoint (no unpickling)")
+    convert.add_argument("zip", type=Path, help="the stable-baselines3 .zip")
+    convert.add_argument("out", type=Path, help="the checkpoint stem to write (OUT.json, OUT.safetensors)")
+    show = sub.add_parser("show", help="print a checkpoint's description")
+    show.add_argument("path", type=Path, help="the checkpoint (.json, stem or folder)")
+    args = parser.parse_args(argv)
+    try:
+        if args.command == "convert":
+            ckpt = sb3_zip_to_checkpoint(args.zip)
+            written = save(args.out, ckpt.actor, ckpt.own_features, ckpt.task_features, ckpt.env_overrides,
+                           {**ckpt.meta, "converted_from": args.zip.name})
+            print(f"written: {written} and {written.with_suffix('.safetensors')}")
+        else:
+            ckpt = load(args.path)
+            print(json.dumps({"network": ckpt.network, "config": ckpt.actor.config(),
+                              "env_overrides": ckpt.env_overrides, "meta": ckpt.meta}, indent=1))
+    except CheckpointError as exc:
+        print(f"error: {exc}")
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

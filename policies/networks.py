@@ -1,0 +1,128 @@
+"""Actor networks of learned bidding policies: observation and action mask in, masked logits out (pure torch).
+
+The observation is ``[own features | task_0 features | … | task_{M−1} features]`` (``taskalloc_env.observation``);
+the logits are ``[pass, bid_0 … bid_{M−1}, quit_0 … quit_{M−1}]``, invalid actions set to ``MASKED_LOGIT``.
+
+* ``pooling``: every task's features, concatenated with the agent's own features, go through one shared encoder;
+  mean- and max-pooling over tasks gives a context. Each task's embedding with the context gives that task's bid
+  and quit logits, the context alone the pass logit (a Deep-Sets network, Zaheer et al. 2017). No weight depends
+  on M, so one set of weights serves any number of tasks.
+* ``mlp``: a plain MLP from the flat observation to the 1 + 2M logits (fixed M).
+
+``NETWORKS`` names every class a checkpoint may ask for; each takes only integer sizes, so a checkpoint's
+architecture is plain JSON (``policies.checkpoint``). Training wraps these actors with a critic
+(``training.sb3_policy``).
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import ClassVar
+
+import numpy as np
+import torch as th
+from torch import nn
+
+MASKED_LOGIT = -1e8
+
+
+def mlp(sizes: list[int], activate_last: bool = True) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for i, (a, b) in enumerate(itertools.pairwise(sizes)):
+        layers.append(nn.Linear(a, b))
+        if activate_last or i < len(sizes) - 2:
+            layers.append(nn.ReLU())
+    return nn.Sequential(*layers)
+
+
+def split_tasks(observation: th.Tensor, own_size: int, task_size: int) -> tuple[th.Tensor, th.Tensor]:
+    """``[own | tasks]`` (B, D) → own (B, O), tasks (B, M, F); M follows from the width."""
+    n_tasks, rest = divmod(observation.shape[-1] - own_size, task_size)
+    if rest or n_tasks < 1:
+        raise ValueError(f"observation width {observation.shape[-1]} does not fit own_size={own_size}, "
+                         f"task_size={task_size}: expected own_size + M * task_size")
+    return observation[:, :own_size], observation[:, own_size:].reshape(-1, n_tasks, task_size)
+
+
+class PoolingEncoder(nn.Module):
+    """Per-task embeddings from a shared encoder and a context from mean- and max-pooling them."""
+
+    def __init__(self, own_size: int, task_size: int, hidden: int) -> None:
+        super().__init__()
+        self.encode = mlp([task_size + own_size, hidden, hidden])
+        self.context = mlp([2 * hidden, hidden])
+
+    def forward(self, own: th.Tensor, tasks: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+        own_per_task = own.unsqueeze(1).expand(-1, tasks.shape[1], -1)
+        embedded = self.encode(th.cat([tasks, own_per_task], dim=-1))                 # (B, M, H)
+        pooled = th.cat([embedded.mean(dim=1), embedded.amax(dim=1)], dim=-1)         # (B, 2H)
+        return embedded, self.context(pooled)
+
+
+class PoolingActor(nn.Module):
+    """The pooling actor: any number of tasks, the same per-task and own features."""
+
+    name: ClassVar[str] = "pooling"
+
+    def __init__(self, own_size: int, task_size: int, hidden: int = 64) -> None:
+        super().__init__()
+        self.own_size, self.task_size, self.hidden = own_size, task_size, hidden
+        self.actor = PoolingEncoder(own_size, task_size, hidden)
+        self.task_head = mlp([2 * hidden, hidden, 2], activate_last=False)
+        self.pass_head = nn.Linear(hidden, 1)
+
+    def config(self) -> dict[str, int]:
+        return {"own_size": self.own_size, "task_size": self.task_size, "hidden": self.hidden}
+
+    def output_layers(self) -> list[nn.Linear]:
+        return [self.task_head[-1], self.pass_head]
+
+    def fits(self, own_size: int, task_size: int, n_tasks: int) -> bool:
+        return (self.own_size, self.task_size) == (own_size, task_size)
+
+    def forward(self, observation: th.Tensor, mask: th.Tensor) -> th.Tensor:
+        own, tasks = split_tasks(observation, self.own_size, self.task_size)
+        embedded, context = self.actor(own, tasks)
+        per_task = self.task_head(th.cat([embedded, context.unsqueeze(1).expand_as(embedded)], dim=-1))  # (B, M, 2)
+        logits = th.cat([self.pass_head(context), per_task[..., 0], per_task[..., 1]], dim=-1)
+        return logits.masked_fill(~mask, MASKED_LOGIT)
+
+
+class MlpActor(nn.Module):
+    """A plain MLP on the flat observation (tied to one number of tasks)."""
+
+    name: ClassVar[str] = "mlp"
+
+    def __init__(self, obs_size: int, n_actions: int, hidden: int = 256) -> None:
+        super().__init__()
+        self.obs_size, self.n_actions, self.hidden = obs_size, n_actions, hidden
+        self.actor = mlp([obs_size, hidden, hidden, n_actions], activate_last=False)
+
+    def config(self) -> dict[str, int]:
+        return {"obs_size": self.obs_size, "n_actions": self.n_actions, "hidden": self.hidden}
+
+    def output_layers(self) -> list[nn.Linear]:
+        return [self.actor[-1]]
+
+    def fits(self, own_size: int, task_size: int, n_tasks: int) -> bool:
+        return self.obs_size == own_size + n_tasks * task_size
+
+    def forward(self, observation: th.Tensor, mask: th.Tensor) -> th.Tensor:
+        if mask.shape[-1] != self.n_actions:
+            raise ValueError(f"the mlp actor was built for {self.n_actions} actions, got {mask.shape[-1]}")
+        return self.actor(observation).masked_fill(~mask, MASKED_LOGIT)
+
+
+NETWORKS: dict[str, type[nn.Module]] = {cls.name: cls for cls in (PoolingActor, MlpActor)}
+
+
+def masked_logits(actor: nn.Module, observation: np.ndarray, action_mask: np.ndarray) -> th.Tensor:
+    """Masked logits (B, 1 + 2M) of a batch of raw observations (B, D) and masks (B, 1 + 2M)."""
+    obs = th.as_tensor(np.asarray(observation), dtype=th.float32)
+    mask = th.as_tensor(np.asarray(action_mask) > 0)
+    with th.no_grad():
+        return actor(obs, mask)
+
+
+def count_parameters(module: nn.Module) -> int:
+    return sum(p.numel() for p in module.parameters())
