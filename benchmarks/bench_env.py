@@ -94,7 +94,7 @@ def bench_convergence(sizes: list[tuple[int, int, int]]) -> None:
             t0 = time.perf_counter()
             allocation = rollout(env, policy, seed=seed)
             times.append(time.perf_counter() - t0)
-            rounds.append(allocation.rounds)
+            rounds.append(allocation.counters.rounds)
             if not allocation.converged:
                 print(f"  seed {seed} did not converge")
         median = statistics.median(times)

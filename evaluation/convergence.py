@@ -32,7 +32,7 @@ def main(argv: list[str] | None = None) -> None:
                            max_rounds=args.max_rounds)
         runs = [rollout(env, policy, seed=s) for s in range(args.seeds)]
         done = [r for r in runs if r.converged]
-        rounds = f"{np.mean([r.rounds for r in done]):.1f}" if done else "-"
+        rounds = f"{np.mean([r.counters.rounds for r in done]):.1f}" if done else "-"
         print(f"{cost:14s} {gain:14s} {agents:4d} {len(done):5d}/{args.seeds:<4d} {rounds:>15s}")
 
 

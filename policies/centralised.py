@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from taskalloc_env.allocation import Allocation
+from taskalloc_env.allocation import Allocation, Counters
 from taskalloc_env.bidding import complete_groups, prerequisites_met
 from taskalloc_env.config import TaskAllocConfig
 from taskalloc_env.groups import admit
@@ -65,7 +65,8 @@ def sgama(scenario: Scenario, cfg: TaskAllocConfig | None = None) -> Allocation:
         paths[i].insert(int(slots[i, j]), int(j))
         gains[i], slots[i] = model.insertion_gains(i, paths[i])
         iterations += 1
-    return Allocation.from_paths(model, paths, cfg.conflict_policy, rounds=iterations, bids=iterations)
+    return Allocation.from_paths(model, paths, cfg.conflict_policy,
+                                 counters=Counters(rounds=iterations, bids=iterations))
 
 
 MAX_AGENTS, MAX_TASKS = 6, 9

@@ -13,6 +13,18 @@ from typing import Any
 from taskalloc_env.scoring import Schedule, ScoringModel, team_score
 
 
+@dataclasses.dataclass
+class Counters:
+    """Cumulative figures of one run (thesis §3.5.1, §4.2: rounds, messages = communication steps, data items)."""
+
+    rounds: int = 0
+    messages: int = 0
+    informative_messages: int = 0
+    data_items: int = 0
+    bids: int = 0
+    quits: int = 0
+
+
 @dataclasses.dataclass(frozen=True)
 class Allocation:
     """One assignment of agents to tasks and how it came about."""
@@ -24,19 +36,14 @@ class Allocation:
     conflicts: tuple[int, ...]                  # tasks with more than L_j members
     score: float
     agent_scores: tuple[float, ...]
-    rounds: int = 0
-    messages: int = 0
-    informative_messages: int = 0
-    data_items: int = 0
-    bids: int = 0
-    quits: int = 0
+    counters: Counters = dataclasses.field(default_factory=Counters)   # how the run got there (a copy)
     converged: bool = True
     agreement: bool = True                      # every agent of a component holds the same table
 
     @classmethod
     def from_paths(cls, model: ScoringModel, paths: Sequence[Sequence[int]], conflict_policy: str = "first_L_paid",
                    schedules: Sequence[Schedule] | None = None, **figures: Any) -> Allocation:
-        """Score ``paths`` (one per agent) and wrap them with the run's ``figures`` (rounds, messages, ...)."""
+        """Score ``paths`` (one per agent) and wrap them with the run's ``figures`` (counters, convergence)."""
         if schedules is None:
             schedules = [model.schedule(i, p) for i, p in enumerate(paths)]
         infeasible = [i for i, s in enumerate(schedules) if not s.feasible]
@@ -62,16 +69,5 @@ class Allocation:
 
     def summary(self) -> dict[str, Any]:
         """The scalar figures (what infos and result tables carry)."""
-        return {
-            "score": self.score,
-            "valid_tasks": self.n_valid,
-            "conflicts": len(self.conflicts),
-            "rounds": self.rounds,
-            "messages": self.messages,
-            "informative_messages": self.informative_messages,
-            "data_items": self.data_items,
-            "bids": self.bids,
-            "quits": self.quits,
-            "converged": self.converged,
-            "agreement": self.agreement,
-        }
+        return {"score": self.score, "valid_tasks": self.n_valid, "conflicts": len(self.conflicts),
+                **dataclasses.asdict(self.counters), "converged": self.converged, "agreement": self.agreement}

@@ -37,6 +37,7 @@ return equals ``evaluate().score / reward_scale``.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Mapping
 from pathlib import Path
@@ -295,11 +296,9 @@ class TaskAllocEnv(ParallelEnv):
     def evaluate(self) -> Allocation:
         """The allocation as it stands: paths with start times, groups, valid tasks, conflicts, score, traffic."""
         p = self.protocol
-        c = p.counters
-        return Allocation.from_paths(p.model, p.knowledge.paths, self.config.conflict_policy,
-                                     schedules=p.schedules, rounds=c.rounds, messages=c.messages,
-                                     informative_messages=c.informative_messages, data_items=c.data_items,
-                                     bids=c.bids, quits=c.quits, converged=p.converged, agreement=p.agreement())
+        return Allocation.from_paths(p.model, p.knowledge.paths, self.config.conflict_policy, schedules=p.schedules,
+                                     counters=dataclasses.replace(p.counters), converged=p.converged,
+                                     agreement=p.agreement())
 
     def render(self):
         if self.render_mode is None:

@@ -13,10 +13,9 @@ run out (T − H_i[j] > δ, ``delta``). Which bids and quits to make is the poli
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
+from taskalloc_env.allocation import Counters
 from taskalloc_env.bidding import BidView, bid_view
 from taskalloc_env.cbba_table import NONE
 from taskalloc_env.config import TaskAllocConfig, round_bound
@@ -29,18 +28,6 @@ from taskalloc_env.scoring import PathTable, Schedule, ScoringModel, TeamScore, 
 
 class ProtocolError(ValueError):
     """A decision the protocol does not allow (a bid that is not valid, a quit that is not allowed)."""
-
-
-@dataclasses.dataclass
-class Counters:
-    """Cumulative figures of one run (spec cbga §6.2)."""
-
-    rounds: int = 0
-    messages: int = 0
-    informative_messages: int = 0
-    data_items: int = 0
-    bids: int = 0
-    quits: int = 0
 
 
 class Protocol:

@@ -64,7 +64,8 @@ def figure(scenario: Scenario, allocation: Allocation, title: str = ""):
     ax.legend(loc="upper right", fontsize=7)
     ax.set_xlabel("time")
     ax.set_ylabel("x position")
-    ax.set_title(title or f"score {allocation.score:.1f}, {allocation.n_valid} valid tasks, round {allocation.rounds}")
+    ax.set_title(title or f"score {allocation.score:.1f}, {allocation.n_valid} valid tasks, "
+                          f"round {allocation.counters.rounds}")
     fig.tight_layout()
     return fig
 

@@ -1,7 +1,9 @@
-"""Test configuration: hypothesis profiles.
+"""Test configuration: Hypothesis profiles.
 
-``HYPOTHESIS_PROFILE=ci`` makes the property tests derandomised (the same examples on every run); the default
-profile explores new examples each run. Example counts are set per test (``settings(max_examples=…)``).
+``HYPOTHESIS_PROFILE=ci`` (what ``scripts/test.sh`` and CI use) derandomises the property tests: every run draws
+the same examples, so a failure in CI fails again on any machine, and ``print_blob`` prints the line that replays
+it. The default ``dev`` profile explores new examples each run and keeps the failing ones in ``.hypothesis/`` so
+they are tried first next time. Example counts are set per test (``settings(max_examples=…)``).
 """
 
 from __future__ import annotations
@@ -9,7 +11,8 @@ from __future__ import annotations
 import os
 
 from hypothesis import settings
+from hypothesis.database import DirectoryBasedExampleDatabase
 
-settings.register_profile("ci", derandomize=True, print_blob=True)
-settings.register_profile("dev", print_blob=True)
+settings.register_profile("ci", derandomize=True, database=None, print_blob=True)
+settings.register_profile("dev", database=DirectoryBasedExampleDatabase(".hypothesis/examples"), print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))

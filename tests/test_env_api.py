@@ -78,7 +78,7 @@ def test_state(name):
     state_test(taskalloc_v0.env(invalid_action="noop", **kw), taskalloc_v0.parallel_env(invalid_action="noop", **kw))
 
 
-@pytest.mark.parametrize("name", CONFIG_IDS)
+@pytest.mark.parametrize("name", [n if n == "small" else pytest.param(n, marks=pytest.mark.slow) for n in CONFIG_IDS])
 def test_render(name, tmp_path):
     kw = CONFIGS[name]
     render_test(lambda render_mode: taskalloc_v0.env(render_mode=render_mode, render_path=tmp_path / "f.png", **kw))

@@ -111,6 +111,7 @@ episodes: 3
     assert " nc)" in table
 
 
+@pytest.mark.slow
 def test_quick_run_writes_every_output_and_report_rebuilds_it(tmp_path):
     out = tmp_path / "out"
     docs = tmp_path / "results.md"

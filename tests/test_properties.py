@@ -11,6 +11,7 @@ return = ``evaluate().score``, quit at most once).
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from helpers import (
     check_converged_allocation,
     check_tables,
@@ -107,6 +108,7 @@ class StableBids:
         self.quit = kn.quit.copy()
 
 
+@pytest.mark.slow
 @PROPERTY_SETTINGS
 @given(kw=scenario_config(), variant=st.sampled_from(sorted(VARIANTS)), seed=st.integers(0, 2**16),
        scale=st.sampled_from([1.0, 50.0]))
@@ -120,6 +122,15 @@ def test_every_variant_converges_to_a_valid_conflict_free_allocation(kw, variant
         assert not episode.quits
 
 
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(kw=scenario_config(), variant=st.sampled_from(sorted(VARIANTS)), seed=st.integers(0, 2**16),
+       scale=st.sampled_from([1.0, 50.0]))
+def test_every_variant_converges_fast_subset(kw, variant, seed, scale):
+    """The property above on a few examples, for the fast test subset."""
+    test_every_variant_converges_to_a_valid_conflict_free_allocation.hypothesis.inner_test(kw, variant, seed, scale)
+
+
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(kw=scenario_config(limited_comms=True), variant=st.sampled_from(["cbga", "cbgabi"]),
        seed=st.integers(0, 2**16))
@@ -146,6 +157,7 @@ def test_limited_communication(kw, variant, seed):
     assert abs(episode.episode_return - alloc.score) < 1e-6
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(kw=scenario_config(distance_costs=("leg",)), variant=st.sampled_from(["cbga", "cbgabi"]),
        seed=st.integers(0, 2**16))
@@ -255,6 +267,7 @@ def team_value(env: TaskAllocEnv, i: int, j: int, gain: float, literal: bool) ->
     return total - displaced + gain
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(kw=st.one_of(scenario_config(small=True), scenario_config(small=True, limited_comms=True)),
        variant=st.sampled_from(["cbga", "cbgabi", "cbga+tb", "cbgabi-literal-delta2"]), seed=st.integers(0, 2**16))
@@ -310,3 +323,11 @@ def test_masks_gains_and_choices_follow_the_spec(kw, variant, seed):
 
 def gains_of(env: TaskAllocEnv, agent: str, action: int) -> float:
     return env.protocol.view().gain[env.agent_index[agent], action - 1]
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(kw=st.one_of(scenario_config(small=True), scenario_config(small=True, limited_comms=True)),
+       variant=st.sampled_from(["cbga", "cbgabi", "cbga+tb", "cbgabi-literal-delta2"]), seed=st.integers(0, 2**16))
+def test_masks_gains_and_choices_fast_subset(kw, variant, seed):
+    """The property above on a few examples, for the fast test subset."""
+    test_masks_gains_and_choices_follow_the_spec.hypothesis.inner_test(kw, variant, seed)

@@ -378,7 +378,7 @@ def test_convergence_needs_d_plus_one_stable_rounds():
     env = TaskAllocEnv(scenario=s, comm_range=1.0)
     ep = run_episode(env, PassPolicy(), seed=0)
     assert env.protocol.graph.diameter == 3
-    assert ep.allocation.rounds == 4 and ep.steps == 4 and ep.allocation.converged
+    assert ep.allocation.counters.rounds == 4 and ep.steps == 4 and ep.allocation.converged
     assert ep.allocation.score == 0 and ep.episode_return == 0
 
 
@@ -413,7 +413,7 @@ def test_cbba_converges_within_the_round_bound(kind, diameter, seed):
     assert p.graph.diameter == diameter
     assert ep.allocation.converged
     bound = min(s.n_tasks, s.n_tasks * s.n_agents) * diameter
-    assert ep.allocation.rounds - (diameter + 1) <= bound
+    assert ep.allocation.counters.rounds - (diameter + 1) <= bound
     for i in range(1, s.n_agents):
         assert np.array_equal(p.knowledge.bids[i], p.knowledge.bids[0])
 

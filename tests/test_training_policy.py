@@ -20,6 +20,8 @@ from training.bc import behaviour_cloning, collect_demonstrations
 from training.sb3_policy import TaskMaskablePolicy, actor_of, as_learned, save_checkpoint
 from training.vec_env import TaskAllocVecEnv, make_env_fns
 
+pytestmark = pytest.mark.slow
+
 ENV = {"scenario": "train_small", "task_quitting": True, "delta": 1, "reward_scale": 100.0}
 
 

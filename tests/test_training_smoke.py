@@ -17,6 +17,8 @@ from policies.learned import LearnedPolicy
 from taskalloc_env import TaskAllocEnv
 from training import train
 
+pytestmark = pytest.mark.slow
+
 SMALL = ["--n-envs", "8", "--n-steps", "32", "--batch-size", "256", "--n-epochs", "5", "--eval-episodes", "24",
          "--progress-bar", "false", "--tensorboard", "false"]
 # A variant of train_small where the choice of task matters more (3 agents, start times within 10 min): uniform

@@ -136,6 +136,7 @@ def test_seeding_reproduces_a_run_across_episodes_and_differs_between_seeds():
     assert a.seed(3) == [3] * 4 + [4] * 4      # copy c gets seed + c; one entry per slot
 
 
+@pytest.mark.slow
 def test_subprocess_copies_match_in_process_copies():
     local = make(n_copies=3)
     remote = make(n_copies=3, n_procs=2)
@@ -168,6 +169,7 @@ def test_mixed_team_gives_slots_to_learned_agents_only():
         make(n_copies=1, scripted={f"uav_{i}": "cbga" for i in range(4)})
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algo", ["maskable_ppo", "ppo"])
 def test_sb3_algorithms_run_on_the_adapter_with_a_seed(algo):
     from sb3_contrib import MaskablePPO
