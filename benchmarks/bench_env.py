@@ -21,6 +21,7 @@ import numpy as np
 
 from policies import make_policy, rollout
 from taskalloc_env import TaskAllocEnv
+from taskalloc_env.errors import run_cli
 from taskalloc_env.scoring import ScoringModel
 
 REFERENCE_SECONDS = {(10, 50): 0.16, (20, 100): 1.4}
@@ -116,4 +117,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(run_cli(main))

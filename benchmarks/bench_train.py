@@ -18,6 +18,7 @@ import time
 import torch as th
 from sb3_contrib import MaskablePPO
 
+from taskalloc_env.errors import run_cli
 from training.train import build_model, load_config
 from training.vec_env import TaskAllocVecEnv, make_env_fns
 
@@ -70,4 +71,4 @@ def main(argv: list[str] | None = None) -> list[dict[str, float]]:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(run_cli(main))

@@ -9,6 +9,7 @@ import argparse
 from collections.abc import Sequence
 
 from evaluation import compare
+from taskalloc_env.errors import run_cli
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -21,4 +22,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_cli(main))

@@ -18,6 +18,7 @@ import numpy as np
 
 from policies import make_policy, rollout
 from taskalloc_env import TaskAllocEnv
+from taskalloc_env.errors import run_cli
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -37,4 +38,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(run_cli(main))

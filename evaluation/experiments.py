@@ -57,11 +57,12 @@ from evaluation.report import (
     write_csv,
 )
 from evaluation.stats import format_p
-from taskalloc_env import TaskAllocConfig, resolve_config
-from taskalloc_env.config import to_mapping
+from taskalloc_env import TaskAllocConfig, resolve_config, resources
+from taskalloc_env.config import read_yaml, to_mapping
+from taskalloc_env.errors import ConfigError, run_cli
 
-ROOT = Path(__file__).resolve().parent.parent
-EXPERIMENT_DIR = ROOT / "configs" / "experiments"
+ROOT = Path(__file__).resolve().parent.parent   # the checkout (for the git commit of a run), if this is one
+RESULTS, DOCS = Path("results"), Path("docs") / "results.md"     # relative to where the command runs
 KEYS = {"name", "title", "source", "scenario", "overrides", "sweep", "series", "baseline", "metrics", "episodes",
         "headline", "published", "checks", "quick"}
 TESTS = ("greater", "less", "same", "ratio_above", "ratio_below")
@@ -127,8 +128,7 @@ class Experiment:
         clash = set(point.overrides) & set(series.overrides)
         if clash:
             raise ValueError(f"{self.name}: series {series.label!r} and point {point.label!r} both set {sorted(clash)}")
-        scenario = self.scenario if Path(self.scenario).suffix not in (".yaml", ".yml") else ROOT / self.scenario
-        return resolve_config(scenario, **self.overrides, **point.overrides, **series.overrides)
+        return resolve_config(self.scenario, **self.overrides, **point.overrides, **series.overrides)
 
 
 def _points(sweep: Mapping[str, Any] | None) -> tuple[list[Point], str]:
@@ -168,12 +168,22 @@ def _matches(point: Point, want: Any) -> bool:
     return point.label == str(want)
 
 
-def load_experiment(path: str | Path) -> Experiment:
+def experiment_source(name_or_path: str | Path) -> Path | Any:
+    """An experiment name (a file of ``configs/experiments``) or a path to a YAML file."""
+    if isinstance(name_or_path, str) and resources.is_name(name_or_path):
+        return resources.named("experiments", name_or_path)
+    path = Path(name_or_path)
+    if not path.is_file():
+        raise ConfigError(f"experiment file {str(path)!r} does not exist; names: {resources.names('experiments')}")
+    return path
+
+
+def load_experiment(name_or_path: str | Path) -> Experiment:
     """Read and validate an experiment YAML (every cell's config is resolved, so bad fields fail here)."""
-    path = Path(path)
-    if not path.exists() and (EXPERIMENT_DIR / f"{path}.yaml").exists():
-        path = EXPERIMENT_DIR / f"{path}.yaml"
-    raw = yaml.safe_load(path.read_text()) or {}
+    path = experiment_source(name_or_path)
+    raw = read_yaml(path, "experiment file") or {}
+    if not isinstance(raw, Mapping):
+        raise ConfigError(f"experiment file {str(path)!r} must hold a mapping, got {type(raw).__name__}")
     unknown = set(raw) - KEYS
     if unknown:
         raise ValueError(f"{path}: unknown keys {sorted(unknown)}; known: {sorted(KEYS)}")
@@ -467,12 +477,12 @@ def report_experiment(exp: Experiment, out: Path, docs: Path | None) -> None:
 
 
 # -- command line --------------------------------------------------------------------------------------------------
-def experiment_paths(paths: Sequence[str], every: bool) -> list[Path]:
+def experiment_paths(paths: Sequence[str], every: bool) -> list[str]:
     if every:
-        return sorted(EXPERIMENT_DIR.glob("*.yaml"))
+        return resources.names("experiments")
     if not paths:
-        raise SystemExit("name experiment files, or pass --all")
-    return [Path(p) for p in paths]
+        raise ConfigError("name experiments (python -m evaluation.experiments list) or files, or pass --all")
+    return list(paths)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -482,25 +492,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     report = sub.add_parser("report", help="rewrite tables, plots and docs from saved episodes.csv files")
     sub.add_parser("list", help="list the experiment files")
     for p in (run, report):
-        p.add_argument("paths", nargs="*", help="experiment YAML files (or names in configs/experiments)")
-        p.add_argument("--all", action="store_true", help="every configs/experiments/*.yaml")
-        p.add_argument("--out", type=Path, default=None, help="results directory (default results/, "
-                                                               "results/tmp/quick with --quick)")
-        p.add_argument("--docs", type=Path, default=ROOT / "docs" / "results.md", help="results page to update")
+        p.add_argument("paths", nargs="*", metavar="NAME_OR_FILE",
+                       help="experiment names (see `list`) or experiment YAML files")
+        p.add_argument("--all", action="store_true", help="every experiment of configs/experiments")
+        p.add_argument("--out", type=Path, default=None,
+                       help=f"results folder (default {RESULTS}/; {RESULTS}/tmp/quick with run --quick)")
+        p.add_argument("--docs", type=Path, default=None,
+                       help=f"results page whose experiment blocks to rewrite (default {DOCS} when it exists; "
+                            "never with run --quick unless given)")
         p.add_argument("--no-docs", action="store_true", help="leave the results page alone")
     run.add_argument("--episodes", type=int, default=None, help="seeds per cell (default: the file's, 100)")
     run.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes (default: all cores)")
     run.add_argument("--quick", action="store_true", help="2 seeds at <= 3 points, into results/tmp/quick")
-    run.add_argument("--no-progress", action="store_true")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
     if args.command == "list":
-        for path in sorted(EXPERIMENT_DIR.glob("*.yaml")):
-            exp = load_experiment(path)
-            print(f"{path.relative_to(ROOT)}  {exp.title}")
+        for name in resources.names("experiments"):
+            print(f"{name:<26} {load_experiment(name).title}")
         return 0
     quick = args.command == "run" and args.quick
-    out = args.out or (ROOT / "results" / "tmp" / "quick" if quick else ROOT / "results")
-    docs = None if args.no_docs or (quick and "--docs" not in (argv or sys.argv)) else args.docs
+    out = args.out or (RESULTS / "tmp" / "quick" if quick else RESULTS)
+    docs = args.docs or (None if quick or not DOCS.exists() else DOCS)
+    if args.no_docs:
+        docs = None
     experiments = [load_experiment(p) for p in experiment_paths(args.paths, args.all)]
     started = time.perf_counter()
     for exp in experiments:
@@ -537,4 +551,4 @@ def suite_block(experiments: Sequence[Experiment], out: Path, docs: Path) -> str
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_cli(main))

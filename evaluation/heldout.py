@@ -28,6 +28,7 @@ from evaluation.seeds import TEST_SEEDS
 from evaluation.stats import format_mean_sd, format_p, paired
 from taskalloc_env import resources
 from taskalloc_env.config import resolve_config
+from taskalloc_env.errors import run_cli
 
 DEFAULT_LEARNED = (
     ("behaviour cloning (CBGABI)", str(resources.folder("models") / "train_small_bc" / "bc.json")),
@@ -121,4 +122,4 @@ def main(argv: list[str] | None = None) -> str:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(run_cli(main))

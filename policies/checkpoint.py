@@ -30,6 +30,8 @@ from importlib.resources.abc import Traversable
 from pathlib import Path
 from typing import Any
 
+from taskalloc_env.errors import ConfigError, run_cli
+
 FORMAT, VERSION = "taskalloc-checkpoint", 1
 MAX_JSON_BYTES = 1 << 20
 MAX_SIZE = 1 << 16              # largest integer size a network may be built with
@@ -39,7 +41,7 @@ PROTOCOL_FIELDS = ("cbba_table", "prereq_mode", "release_order", "task_quitting"
                    "require_known_capacity", "consensus", "max_bundle", "max_rounds")
 
 
-class CheckpointError(ValueError):
+class CheckpointError(ConfigError):
     """A checkpoint is missing, malformed, or asks for something outside what may be loaded."""
 
 
@@ -260,21 +262,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     show = sub.add_parser("show", help="print a checkpoint's description")
     show.add_argument("path", type=Path, help="the checkpoint (.json, stem or folder)")
     args = parser.parse_args(argv)
-    try:
-        if args.command == "convert":
-            ckpt = sb3_zip_to_checkpoint(args.zip)
-            written = save(args.out, ckpt.actor, ckpt.own_features, ckpt.task_features, ckpt.env_overrides,
-                           {**ckpt.meta, "converted_from": args.zip.name})
-            print(f"written: {written} and {written.with_suffix('.safetensors')}")
-        else:
-            ckpt = load(args.path)
-            print(json.dumps({"network": ckpt.network, "config": ckpt.actor.config(),
-                              "env_overrides": ckpt.env_overrides, "meta": ckpt.meta}, indent=1))
-    except CheckpointError as exc:
-        print(f"error: {exc}")
-        return 2
+    if args.command == "convert":
+        ckpt = sb3_zip_to_checkpoint(args.zip)
+        written = save(args.out, ckpt.actor, ckpt.own_features, ckpt.task_features, ckpt.env_overrides,
+                       {**ckpt.meta, "converted_from": args.zip.name})
+        print(f"written: {written} and {written.with_suffix('.safetensors')}")
+    else:
+        ckpt = load(args.path)
+        print(json.dumps({"network": ckpt.network, "config": ckpt.actor.config(),
+                          "env_overrides": ckpt.env_overrides, "meta": ckpt.meta}, indent=1))
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_cli(main))

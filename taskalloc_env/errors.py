@@ -1,6 +1,10 @@
-"""The errors the package raises for bad input: each names the field or the action and what is allowed."""
+"""The errors the package raises for bad input, each naming the field or the action and what is allowed, and the
+one way every command line reports them."""
 
 from __future__ import annotations
+
+import sys
+from collections.abc import Callable
 
 
 class ConfigError(ValueError):
@@ -9,3 +13,13 @@ class ConfigError(ValueError):
 
 class InvalidActionError(ValueError):
     """An action outside the mask, a missing or unknown agent, or a step outside an episode."""
+
+
+def run_cli(main: Callable[[], object]) -> int:
+    """Run a command line's ``main``: bad input (a ``ConfigError``) is one line on stderr and exit status 2."""
+    try:
+        result = main()
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return result if isinstance(result, int) else 0

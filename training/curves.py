@@ -18,6 +18,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+from taskalloc_env.errors import run_cli
+
 
 def read_curve(path: Path) -> dict[str, list[float]]:
     with open(path, newline="") as fh:
@@ -55,4 +57,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(run_cli(main))

@@ -1,8 +1,8 @@
 """Train a shared bidding policy: optional behaviour cloning from CBGABI, then (Maskable)PPO.
 
-    python -m training.train --config configs/training/train_small.yaml
-    python -m training.train --config configs/training/train_small.yaml --seed 1 --total-steps 200000 \\
-        --n-envs 16 --scripted-agents "{uav_0: cbga}"
+    python -m training.train --config train_small
+    python -m training.train --config train_small --seed 1 --total-steps 200000 --n-envs 16 \\
+        --scripted-agents "{uav_0: cbga}"
 
 Every field of :class:`TrainConfig` can be set in the YAML file and overridden on the command line
 (``--field-name value``; values are read as YAML, so ``null``, ``true``, ``1e-4`` and ``{k: v}`` work).
@@ -22,6 +22,7 @@ import argparse
 import dataclasses
 import sys
 import time
+import types
 import typing
 from pathlib import Path
 from typing import Any
@@ -38,11 +39,15 @@ from evaluation.episodes import evaluate, summarise
 from evaluation.seeds import DEMO_SEED_START, TEST_SEEDS, VALIDATION_SEED_START
 from policies.networks import count_parameters
 from policies.teams import scripted_env_overrides, with_teammates
+from taskalloc_env import resources
+from taskalloc_env.config import read_yaml
 from taskalloc_env.env import TaskAllocEnv
+from taskalloc_env.errors import ConfigError, run_cli
 from taskalloc_env.observation import ObservationLayout
 from training.bc import behaviour_cloning, collect_demonstrations
 from training.callbacks import EpisodeMetricsCallback, PeriodicEvalCallback
 from training.sb3_policy import (
+    BODIES,
     TaskMaskablePolicy,
     TaskPolicy,
     as_learned,
@@ -54,56 +59,67 @@ from training.vec_env import TaskAllocVecEnv, make_env_fns
 ALGOS = {"maskable_ppo": (MaskablePPO, TaskMaskablePolicy), "ppo": (PPO, TaskPolicy)}
 
 
+def opt(default: Any, help: str) -> Any:
+    """A config field with an immutable default and its help text (shown by ``--help``)."""
+    return dataclasses.field(default=default, metadata={"help": help})
+
+
 @dataclasses.dataclass
 class TrainConfig:
     """Everything a run needs; the resolved copy is saved as ``config.yaml`` next to the model."""
 
-    name: str = "run"
-    out_dir: str | None = None               # small artefacts (model, config, eval curve); default runs/<name>
-    log_dir: str | None = None               # TensorBoard, checkpoints, best model; default runs/<name>
-    seed: int = 0
+    name: str = opt("run", "run name: the default output folder is runs/<name>-<date-time>")
+    out_dir: str | None = opt(None, "folder for the checkpoints, config, eval curve and summary (default: a fresh "
+                                    "runs/<name>-<date-time>); an existing model there is kept unless --overwrite")
+    log_dir: str | None = opt(None, "folder for TensorBoard logs and the best model (default: out_dir/logs)")
+    overwrite: bool = opt(False, "replace a model already in out_dir (needed to regenerate a committed model)")
+    seed: int = opt(0, "seed of the training instances (copy c starts from seed + c), of torch and of PPO")
     # environment
-    scenario: str = "train_small"
-    env_overrides: dict[str, Any] = dataclasses.field(default_factory=lambda: {"task_quitting": True, "delta": 1})
-    reward_scale: float = 100.0              # rewards are Δscore / reward_scale
-    max_cycles: int | None = 200
-    scripted_agents: dict[str, str] = dataclasses.field(default_factory=dict)   # e.g. {uav_0: cbga}
-    n_envs: int = 8                          # env copies; slots = n_envs × learned agents per copy
-    n_procs: int = 0                         # 0: copies in this process; k: spread over k subprocesses
+    scenario: str = opt("train_small", "scenario name (configs/scenarios) or YAML path the policy trains on")
+    env_overrides: dict[str, Any] = dataclasses.field(
+        default_factory=lambda: {"task_quitting": True, "delta": 1},
+        metadata={"help": "config fields set on top of the scenario, e.g. {task_quitting: true}"})
+    reward_scale: float = opt(100.0, "rewards are the change of the team score divided by this")
+    max_cycles: int | None = opt(200, "steps before an episode is truncated")
+    scripted_agents: dict[str, str] = dataclasses.field(
+        default_factory=dict, metadata={"help": "agents played by scripted policies, e.g. {uav_0: cbga}"})
+    n_envs: int = opt(8, "environment copies; PPO slots = n_envs × learned agents per copy")
+    n_procs: int = opt(0, "0: copies in this process; k: spread the copies over k subprocesses")
     # algorithm
-    algo: str = "maskable_ppo"               # maskable_ppo | ppo
-    total_steps: int = 300_000               # PPO steps (agent transitions); 0: behaviour cloning only
-    body: str = "pooling"                    # pooling | mlp
-    hidden: int = 64
-    learning_rate: float = 3e-4
-    linear_lr: bool = False                  # decay the learning rate linearly to 0
-    n_steps: int = 128
-    batch_size: int = 512
-    n_epochs: int = 10
-    gamma: float = 1.0
-    gae_lambda: float = 0.95
-    clip_range: float = 0.2
-    ent_coef: float = 0.01
-    vf_coef: float = 0.5
-    max_grad_norm: float = 0.5
-    target_kl: float | None = None
-    init_from: str | None = None             # start from this checkpoint's weights
+    algo: str = opt("maskable_ppo", "maskable_ppo (sb3-contrib) | ppo (SB3, masking inside the network)")
+    total_steps: int = opt(300_000, "PPO agent transitions (rounded up to whole rollouts of n_steps × slots); "
+                                    "0: behaviour cloning only")
+    body: str = opt("pooling", "actor network: pooling (any number of tasks) | mlp (fixed number of tasks)")
+    hidden: int = opt(64, "hidden width of the network")
+    learning_rate: float = opt(3e-4, "Adam learning rate")
+    linear_lr: bool = opt(False, "decay the learning rate linearly to 0")
+    n_steps: int = opt(128, "steps per slot in one rollout")
+    batch_size: int = opt(512, "minibatch size of a PPO update")
+    n_epochs: int = opt(10, "passes over a rollout per update")
+    gamma: float = opt(1.0, "discount (1: the return is the final team score)")
+    gae_lambda: float = opt(0.95, "GAE λ")
+    clip_range: float = opt(0.2, "PPO clipping range")
+    ent_coef: float = opt(0.01, "entropy bonus")
+    vf_coef: float = opt(0.5, "value-loss weight")
+    max_grad_norm: float = opt(0.5, "gradient-norm clipping")
+    target_kl: float | None = opt(None, "stop an update early beyond this KL divergence (null: never)")
+    init_from: str | None = opt(None, "start from this checkpoint's actor weights (a model name or path)")
     # imitation warm start
-    bc_episodes: int = 0                     # expert episodes; 0: no behaviour cloning
-    bc_expert: str = "cbgabi"
-    bc_epochs: int = 10
-    bc_batch_size: int = 256
-    bc_learning_rate: float = 1e-3
-    bc_ent_coef: float = 0.0                 # entropy bonus while cloning (keeps the clone exploring for PPO)
+    bc_episodes: int = opt(0, "expert episodes for behaviour cloning; 0: no behaviour cloning")
+    bc_expert: str = opt("cbgabi", "the scripted policy to clone")
+    bc_epochs: int = opt(10, "behaviour-cloning epochs")
+    bc_batch_size: int = opt(256, "behaviour-cloning minibatch size")
+    bc_learning_rate: float = opt(1e-3, "behaviour-cloning learning rate")
+    bc_ent_coef: float = opt(0.0, "entropy bonus while cloning (keeps the clone exploring for PPO)")
     # evaluation, logging
-    eval_freq: int = 50_000
-    eval_episodes: int = 50
-    eval_baseline: str = "cbgabi"
-    checkpoint_freq: int = 0
-    tensorboard: bool = True
-    progress_bar: bool = True
-    torch_threads: int = 1
-    verbose: int = 0
+    eval_freq: int = opt(50_000, "steps between evaluations on validation seeds (0: only at the end)")
+    eval_episodes: int = opt(50, "validation instances per evaluation")
+    eval_baseline: str = opt("cbgabi", "the scripted policy the evaluation compares with")
+    checkpoint_freq: int = opt(0, "steps between SB3 checkpoints in log_dir (0: none)")
+    tensorboard: bool = opt(True, "write TensorBoard logs to log_dir")
+    progress_bar: bool = opt(True, "show a progress bar")
+    torch_threads: int = opt(1, "torch threads")
+    verbose: int = opt(0, "SB3 verbosity")
 
     def env_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of ``TaskAllocEnv`` (scripted teammates' needs merged in)."""
@@ -112,36 +128,61 @@ class TrainConfig:
                 **overrides}
 
     def check(self) -> None:
+        """Bad values raise ``ConfigError`` naming the field and what is allowed."""
+        hints = typing.get_type_hints(TrainConfig)
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            hint = hints[field.name]
+            members = typing.get_args(hint) if typing.get_origin(hint) in (typing.Union, types.UnionType) else (hint,)
+            kinds = tuple(typing.get_origin(t) or t for t in members)
+            if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
+                names = " | ".join("null" if k is type(None) else k.__name__ for k in kinds)
+                raise ConfigError(f"training field {field.name!r}: got {value!r}; allowed: {names}")
         if self.algo not in ALGOS:
-            raise SystemExit(f"algo {self.algo!r} is not one of {sorted(ALGOS)}")
+            raise ConfigError(f"training field 'algo': got {self.algo!r}; allowed: {' | '.join(sorted(ALGOS))}")
+        if self.body not in BODIES:
+            raise ConfigError(f"training field 'body': got {self.body!r}; allowed: {' | '.join(BODIES)}")
+        for name in ("n_envs", "n_steps", "batch_size", "n_epochs", "hidden", "torch_threads"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"training field {name!r}: got {getattr(self, name)!r}; allowed: an integer >= 1")
+        for name in ("total_steps", "bc_episodes", "eval_freq", "checkpoint_freq", "n_procs"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"training field {name!r}: got {getattr(self, name)!r}; allowed: an integer >= 0")
         train_seeds = set(range(self.seed, self.seed + self.n_envs))
         for label, seeds in (("test", TEST_SEEDS),
                              ("validation", range(VALIDATION_SEED_START, VALIDATION_SEED_START + self.eval_episodes)),
                              ("demonstration", range(DEMO_SEED_START, DEMO_SEED_START + self.bc_episodes))):
             if train_seeds & set(seeds):
-                raise SystemExit(f"training seeds {self.seed}..{self.seed + self.n_envs - 1} overlap the {label} "
-                                 f"seeds {seeds.start}..{seeds.stop - 1}; pick another --seed")
+                raise ConfigError(f"training seeds {self.seed}..{self.seed + self.n_envs - 1} overlap the {label} "
+                                  f"seeds {seeds.start}..{seeds.stop - 1}; pick another --seed")
 
 
 def load_config(argv: list[str] | None = None) -> TrainConfig:
-    """``--config file.yaml`` then ``--field value`` overrides (values parsed as YAML)."""
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--config", type=Path, help="YAML file with TrainConfig fields")
+    """``--config NAME_OR_FILE`` then ``--field value`` overrides (values parsed as YAML)."""
+    parser = argparse.ArgumentParser(prog="python -m training.train", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--config", metavar="NAME_OR_FILE",
+                        help="training config: a name from configs/training (train_small) or a YAML file")
     for field in dataclasses.fields(TrainConfig):
         parser.add_argument(f"--{field.name.replace('_', '-')}", dest=field.name, type=yaml.safe_load,
-                            default=argparse.SUPPRESS, metavar="VALUE", help=f"(default: {_default(field)})")
+                            default=argparse.SUPPRESS, metavar="VALUE",
+                            help=f"{field.metadata['help']} (default: {_default(field)})")
     args = vars(parser.parse_args(argv))
     values: dict[str, Any] = {}
-    path = args.pop("config", None)
-    if path is not None:
-        values = yaml.safe_load(path.read_text()) or {}
+    source = args.pop("config", None)
+    if source is not None:
+        path = resources.named("training", source) if resources.is_name(source) else Path(source)
+        values = read_yaml(path, "training config") or {}
+        if not isinstance(values, dict):
+            raise ConfigError(f"training config {str(path)!r} must hold a mapping of TrainConfig fields")
         unknown = sorted(set(values) - {f.name for f in dataclasses.fields(TrainConfig)})
         if unknown:
-            raise SystemExit(f"{path}: unknown fields {unknown}")
+            raise ConfigError(f"training config {str(path)!r}: unknown fields {unknown}; known: "
+                              f"{[f.name for f in dataclasses.fields(TrainConfig)]}")
     values.update(args)
     cfg = TrainConfig(**{k: _coerce(k, v) for k, v in values.items()})
-    cfg.out_dir = cfg.out_dir or f"runs/{cfg.name}"
-    cfg.log_dir = cfg.log_dir or f"runs/{cfg.name}"
+    cfg.out_dir = cfg.out_dir or f"runs/{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    cfg.log_dir = cfg.log_dir or str(Path(cfg.out_dir) / "logs")
     cfg.check()
     return cfg
 
@@ -154,7 +195,7 @@ def _coerce(name: str, value: Any) -> Any:
         try:
             return float(value)
         except ValueError:
-            raise SystemExit(f"--{name.replace('_', '-')}: {value!r} is not a number") from None
+            raise ConfigError(f"training field {name!r}: got {value!r}; allowed: a number") from None
     return value
 
 
@@ -162,6 +203,18 @@ def _default(field: dataclasses.Field) -> Any:
     if field.default_factory is not dataclasses.MISSING:
         return field.default_factory()
     return field.default
+
+
+def prepare_out_dir(cfg: TrainConfig) -> Path:
+    """Create ``out_dir``; refuse to replace a model already there unless ``overwrite`` (committed models stay)."""
+    out_dir = Path(cfg.out_dir)
+    existing = sorted(p.name for p in out_dir.glob("*.json")) if out_dir.is_dir() else []
+    if existing and not cfg.overwrite:
+        raise ConfigError(f"out_dir {str(out_dir)!r} already holds a model ({', '.join(existing)}); pass --overwrite "
+                          "to replace it, or choose another --out-dir")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "eval.csv").unlink(missing_ok=True)     # a new run starts a new learning curve
+    return out_dir
 
 
 def build_model(cfg: TrainConfig, venv: TaskAllocVecEnv) -> MaskablePPO | PPO:
@@ -197,8 +250,7 @@ def validation_score(model: MaskablePPO | PPO, cfg: TrainConfig) -> dict[str, fl
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     cfg = load_config(argv)
-    out_dir, log_dir = Path(cfg.out_dir), Path(cfg.log_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir, log_dir = prepare_out_dir(cfg), Path(cfg.log_dir)
     log_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "config.yaml").write_text(yaml.safe_dump(dataclasses.asdict(cfg), sort_keys=False))
     th.set_num_threads(cfg.torch_threads)
@@ -243,6 +295,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         if cfg.checkpoint_freq > 0:
             callbacks.append(CheckpointCallback(max(1, cfg.checkpoint_freq // venv.num_envs),
                                                 str(log_dir / "checkpoints"), name_prefix=cfg.name))
+        rollout = cfg.n_steps * venv.num_envs
+        if cfg.total_steps % rollout:
+            print(f"note: total_steps {cfg.total_steps} rounds up to {-(-cfg.total_steps // rollout) * rollout}: PPO "
+                  f"collects whole rollouts of n_steps × slots = {cfg.n_steps} × {venv.num_envs} = {rollout} steps",
+                  file=sys.stderr, flush=True)
         t0 = time.perf_counter()
         model.learn(cfg.total_steps, callback=CallbackList(callbacks), progress_bar=cfg.progress_bar,
                     tb_log_name=cfg.name)
@@ -272,4 +329,4 @@ def _plain(value: Any) -> Any:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(run_cli(main))
