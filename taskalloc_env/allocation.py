@@ -23,6 +23,7 @@ class Counters:
     data_items: int = 0
     bids: int = 0
     quits: int = 0
+    invalid_actions: int = 0    # actions outside the mask turned into passes (invalid_action="noop")
 
 
 @dataclasses.dataclass(frozen=True)

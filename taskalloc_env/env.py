@@ -57,7 +57,8 @@ from taskalloc_env.render import ansi_table, figure, rgb_array
 from taskalloc_env.scenario import Scenario, generate
 
 PASS = 0
-INVALID_ACTION_MODES = ("raise", "noop")
+INVALID_ACTION_MODES = ("noop", "raise")
+DTYPES = ("float32", "float64")
 
 
 class TaskAllocEnv(ParallelEnv):
@@ -67,8 +68,9 @@ class TaskAllocEnv(ParallelEnv):
                                           "is_parallelizable": True, "render_fps": 2}
 
     def __init__(self, scenario: str | Path | TaskAllocConfig | Mapping[str, Any] | Scenario = "default",
-                 max_cycles: int | None = None, render_mode: str | None = None, invalid_action: str = "raise",
-                 reward_scale: float = 1.0, render_path: str | Path | None = None, **overrides: Any) -> None:
+                 max_cycles: int | None = None, render_mode: str | None = None, invalid_action: str = "noop",
+                 reward_scale: float = 1.0, render_path: str | Path | None = None, dtype: str = "float32",
+                 **overrides: Any) -> None:
         if isinstance(scenario, Scenario):
             self.fixed_scenario: Scenario | None = scenario
             counts = {"n_agents": scenario.n_agents, "n_tasks": scenario.n_tasks}
@@ -83,6 +85,9 @@ class TaskAllocEnv(ParallelEnv):
             raise ValueError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']} or None")
         if invalid_action not in INVALID_ACTION_MODES:
             raise ValueError(f"invalid_action {invalid_action!r} is not one of {INVALID_ACTION_MODES}")
+        if dtype not in DTYPES:
+            raise ValueError(f"dtype {dtype!r} is not one of {DTYPES}")
+        self.dtype = np.dtype(dtype)
         if max_cycles is not None and (isinstance(max_cycles, bool) or not isinstance(max_cycles, int)
                                        or max_cycles < 1):
             raise ValueError(f"max_cycles must be a positive integer or None, got {max_cycles!r}")
@@ -114,12 +119,12 @@ class TaskAllocEnv(ParallelEnv):
         builder = ObservationBuilder(probe_protocol, self._max_agents_per_task, self._max_rounds)
         self.observation_layout = builder.layout
         self._observation_space = spaces.Dict({
-            "observation": builder.space(),
+            "observation": builder.space(self.dtype),
             "action_mask": spaces.Box(0, 1, (1 + 2 * m,), dtype=np.int8),
         })
         self._action_space = spaces.Discrete(1 + 2 * m)
         state_size = len(state_vector(probe_protocol))
-        self.state_space = spaces.Box(-np.inf, np.inf, (state_size,), dtype=np.float64)
+        self.state_space = spaces.Box(-np.inf, np.inf, (state_size,), dtype=self.dtype)
 
     # -- spaces ------------------------------------------------------------------------------------------------
     @functools.cache  # noqa: B019 - one space object per agent, as parallel_api_test requires
@@ -169,6 +174,8 @@ class TaskAllocEnv(ParallelEnv):
         return observations, infos
 
     def step(self, actions: Mapping[str, Any]):
+        if self._protocol is None:
+            raise InvalidActionError("step() called before reset(); call reset() first")
         if self._done or not self.agents:
             if self.invalid_action == "noop":
                 return {}, {}, {}, {}, {}
@@ -176,6 +183,7 @@ class TaskAllocEnv(ParallelEnv):
         protocol = self.protocol
         flags: dict[str, str] = {}
         decisions = self._read_actions(actions, flags)
+        protocol.counters.invalid_actions += len(flags)
         view = protocol.view()
         for i, action in decisions:
             m = self.config.n_tasks
@@ -241,11 +249,12 @@ class TaskAllocEnv(ParallelEnv):
         return decisions
 
     def _check_action(self, agent: str, raw: Any, mask: np.ndarray) -> tuple[int | None, str | None]:
+        value = raw.item() if isinstance(raw, np.ndarray) and raw.size == 1 else raw   # a 0-d or 1-element array
         try:
-            action = int(raw)
-        except (TypeError, ValueError):
+            action = int(value)
+        except (TypeError, ValueError, OverflowError):
             return None, f"action {raw!r} of {agent} is not an integer"
-        if action != raw or not 0 <= action < len(mask):
+        if isinstance(value, bool) or action != value or not 0 <= action < len(mask):
             return None, f"action {raw!r} of {agent} is outside Discrete({len(mask)})"
         if not mask[action]:
             return None, f"action {action} ({self.describe_action(action)}) of {agent} is not allowed by its mask: " \
@@ -270,7 +279,7 @@ class TaskAllocEnv(ParallelEnv):
 
     # -- outputs ---------------------------------------------------------------------------------------------------
     def _observations(self) -> dict[str, dict[str, np.ndarray]]:
-        obs = self._builder.build(self.protocol, self._passed)
+        obs = self._builder.build(self.protocol, self._passed).astype(self.dtype)
         self._masks = self._builder.action_masks(self.protocol, self._passed)
         return {a: {"observation": obs[self.agent_index[a]], "action_mask": self._masks[self.agent_index[a]].copy()}
                 for a in self.agents}
@@ -285,13 +294,14 @@ class TaskAllocEnv(ParallelEnv):
         for a in self.agents:
             info = dict(figures)
             info["passed"] = bool(self._passed[self.agent_index[a]])
+            info["action_mask"] = self._masks[self.agent_index[a]].copy()
             if a in flags:
                 info["invalid_action"] = flags[a]
             infos[a] = info
         return infos
 
     def state(self) -> np.ndarray:
-        return state_vector(self.protocol)
+        return state_vector(self.protocol).astype(self.dtype)
 
     def evaluate(self) -> Allocation:
         """The allocation as it stands: paths with start times, groups, valid tasks, conflicts, score, traffic."""

@@ -140,8 +140,8 @@ class ObservationBuilder:
         self.scales = Scales.of(s)
         self._static = self._static_task_features(protocol)
 
-    def space(self) -> spaces.Box:
-        return spaces.Box(self.low, self.high, dtype=np.float64)
+    def space(self, dtype: np.dtype) -> spaces.Box:
+        return spaces.Box(self.low.astype(dtype), self.high.astype(dtype), dtype=dtype)
 
     def _static_task_features(self, protocol: Protocol) -> np.ndarray:
         s = protocol.scenario

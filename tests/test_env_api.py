@@ -1,8 +1,9 @@
 """The PettingZoo contract, determinism, bad input and rendering of ``taskalloc/TaskAlloc-v0``.
 
-``max_cycles_test``, ``parallel_seed_test`` and ``state_test`` sample actions without the mask, so their
-constructors use ``invalid_action="noop"`` (an action outside the mask becomes a flagged pass). PettingZoo 1.27's
-``parallel_seed_test`` compares only one step, so ``test_long_runs_are_deterministic`` compares whole episodes.
+Every PettingZoo check runs with the default constructor arguments: ``max_cycles_test``, ``parallel_seed_test`` and
+``state_test`` sample actions without the mask, which the default ``invalid_action="noop"`` turns into flagged
+passes. PettingZoo 1.27's ``parallel_seed_test`` compares only one step, so ``test_long_runs_are_deterministic``
+compares whole episodes.
 """
 
 from __future__ import annotations
@@ -68,14 +69,14 @@ def test_aec_api(name):
 @pytest.mark.parametrize("name", CONFIG_IDS)
 def test_seed_tests(name):
     kw = CONFIGS[name]
-    parallel_seed_test(lambda: taskalloc_v0.parallel_env(invalid_action="noop", **kw))
+    parallel_seed_test(lambda: taskalloc_v0.parallel_env(**kw))
     seed_test(lambda: taskalloc_v0.env(**kw))
 
 
 @pytest.mark.parametrize("name", CONFIG_IDS)
 def test_state(name):
     kw = CONFIGS[name]
-    state_test(taskalloc_v0.env(invalid_action="noop", **kw), taskalloc_v0.parallel_env(invalid_action="noop", **kw))
+    state_test(taskalloc_v0.env(**kw), taskalloc_v0.parallel_env(**kw))
 
 
 @pytest.mark.parametrize("name", [n if n == "small" else pytest.param(n, marks=pytest.mark.slow) for n in CONFIG_IDS])
@@ -97,8 +98,8 @@ def _line_scenario():
 ])
 def test_max_cycles(kwargs):
     module = types.SimpleNamespace(
-        parallel_env=functools.partial(taskalloc_v0.parallel_env, invalid_action="noop", **kwargs),
-        env=functools.partial(taskalloc_v0.env, invalid_action="noop", **kwargs))
+        parallel_env=functools.partial(taskalloc_v0.parallel_env, **kwargs),
+        env=functools.partial(taskalloc_v0.env, **kwargs))
     max_cycles_test(module)
 
 
@@ -217,7 +218,7 @@ def test_round_bound_truncates():
 # -- bad input ----------------------------------------------------------------------------------------------------
 @pytest.fixture
 def env():
-    e = TaskAllocEnv(n_agents=3, n_tasks=4, agents_per_task=[1, 2])
+    e = TaskAllocEnv(n_agents=3, n_tasks=4, agents_per_task=[1, 2], invalid_action="raise")
     e.reset(seed=0)
     return e
 
@@ -260,7 +261,7 @@ def test_non_dict_actions_raise(env):
 
 
 def test_step_after_the_end_raises():
-    e = TaskAllocEnv(n_agents=2, n_tasks=2, max_cycles=1)
+    e = TaskAllocEnv(n_agents=2, n_tasks=2, max_cycles=1, invalid_action="raise")
     e.reset(seed=0)
     e.step({a: 0 for a in e.agents})
     assert e.agents == []
@@ -269,9 +270,10 @@ def test_step_after_the_end_raises():
 
 
 def test_invalid_actions_become_flagged_passes_with_noop():
+    """The default ``noop``: a bad action becomes a pass, flagged in infos and counted in ``evaluate()``."""
     kw = {"n_agents": 3, "n_tasks": 4, "agents_per_task": [1, 2]}
-    strict = TaskAllocEnv(**kw)
-    lenient = TaskAllocEnv(invalid_action="noop", **kw)
+    strict = TaskAllocEnv(invalid_action="raise", **kw)
+    lenient = TaskAllocEnv(**kw)
     strict.reset(seed=0)
     lenient.reset(seed=0)
     bad = {"uav_0": 1 + 4, "uav_1": 0}          # uav_0: forbidden quit; uav_2: missing
@@ -284,10 +286,30 @@ def test_invalid_actions_become_flagged_passes_with_noop():
         assert infos[a]["round"] == ref_infos[a]["round"]
         assert infos[a]["score"] == ref_infos[a]["score"]
     np.testing.assert_array_equal(lenient.protocol.knowledge.bids, strict.protocol.knowledge.bids)
+    assert lenient.evaluate().counters.invalid_actions == 2 and strict.evaluate().counters.invalid_actions == 0
+    _, _, _, _, infos = lenient.step({"uav_0": float("inf"), "uav_1": np.array([0]), "uav_2": np.int64(0)})
+    assert "not an integer" in infos["uav_0"]["invalid_action"]
+    assert "invalid_action" not in infos["uav_1"] and "invalid_action" not in infos["uav_2"]
+
+
+def test_step_before_reset_is_a_clear_error():
+    with pytest.raises(InvalidActionError, match=r"before reset\(\)"):
+        TaskAllocEnv(n_agents=2, n_tasks=2).step({"uav_0": 0, "uav_1": 0})
+
+
+def test_infos_carry_the_action_mask():
+    e = TaskAllocEnv(n_agents=3, n_tasks=4)
+    obs, infos = e.reset(seed=1)
+    for agent in e.agents:
+        np.testing.assert_array_equal(infos[agent]["action_mask"], obs[agent]["action_mask"])
+        assert infos[agent]["action_mask"].dtype == np.int8
+    assert obs["uav_0"]["observation"].dtype == np.float32 and e.state().dtype == np.float32
+    wide = TaskAllocEnv(n_agents=3, n_tasks=4, dtype="float64")
+    assert wide.reset(seed=1)[0]["uav_0"]["observation"].dtype == np.float64
 
 
 def test_noop_step_after_the_end_is_harmless():
-    e = TaskAllocEnv(n_agents=2, n_tasks=2, max_cycles=1, invalid_action="noop")
+    e = TaskAllocEnv(n_agents=2, n_tasks=2, max_cycles=1)
     e.reset(seed=0)
     e.step({a: 0 for a in e.agents})
     result = e.step({"uav_0": 0})
@@ -296,7 +318,7 @@ def test_noop_step_after_the_end_is_harmless():
 
 def test_passed_agent_may_only_pass_until_the_round_ends():
     """In the synchronous protocol a round ends when every agent has passed; until then a passed agent may only pass."""
-    e = TaskAllocEnv(n_agents=3, n_tasks=4, agents_per_task=1)
+    e = TaskAllocEnv(n_agents=3, n_tasks=4, agents_per_task=1, invalid_action="raise")
     obs, _ = e.reset(seed=0)
     bids = {a: np.flatnonzero(obs[a]["action_mask"][1:5]) + 1 for a in e.agents}
     bidder, waiter = "uav_0", "uav_1"

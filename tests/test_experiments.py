@@ -11,6 +11,7 @@ import pytest
 from scipy import stats as sps
 
 from evaluation import experiments
+from taskalloc_env import resources
 from evaluation.episodes import Episode, check_pairing, fingerprint, run_episode, run_episodes
 from evaluation.stats import mean_sd, paired, paired_t_pvalue, share_better, share_tied, wilcoxon_pvalue
 from taskalloc_env import TaskAllocEnv, resolve_config
@@ -136,7 +137,7 @@ def test_quick_run_writes_every_output_and_report_rebuilds_it(tmp_path):
 
 
 def test_every_experiment_file_loads_and_covers_the_published_experiments():
-    names = {experiments.load_experiment(p).name for p in sorted(experiments.EXPERIMENT_DIR.glob("*.yaml"))}
+    names = {experiments.load_experiment(name).name for name in resources.names("experiments")}
     for required in ("fig3_11_cbba_vs_cbga", "fig3_17_sgama_agents", "fig5_11_l_sweep", "fig5_16_l4",
                      "fig5_7_13_all_l10", "fig3_23_heterogeneous", "fig3_25_prerequisites", "optimality_gap"):
         assert required in names

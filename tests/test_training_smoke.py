@@ -14,7 +14,7 @@ pytest.importorskip("sb3_contrib")
 from evaluation.seeds import VALIDATION_SEED_START
 from policies import make_policy, rollout
 from policies.learned import LearnedPolicy
-from taskalloc_env import TaskAllocEnv
+from taskalloc_env import ConfigError, TaskAllocEnv
 from training import train
 
 pytestmark = pytest.mark.slow
@@ -72,7 +72,10 @@ def test_behaviour_cloning_then_ppo_and_a_mixed_team(tmp_path):
     # evaluation used the same mixed team: CBGA plays uav_0, the learned policy the other three agents
     assert summary["ppo"]["baseline_score"] > 0
     assert summary["bc"]["validation"]["score"] > 0.9 * summary["ppo"]["baseline_score"]
-    with pytest.raises(SystemExit, match="overlap"):
+    with pytest.raises(ConfigError, match="overlap"):
         train.load_config(["--seed", "9999", "--n-envs", "4"])
-    with pytest.raises(SystemExit, match="algo"):
+    with pytest.raises(ConfigError, match="'algo': got 'dqn'; allowed: maskable_ppo | ppo"):
         train.load_config(["--algo", "dqn"])
+    # a second run into the same folder would replace the model: refused unless asked
+    with pytest.raises(ConfigError, match="--overwrite"):
+        train.main(["--name", "bc", "--out-dir", str(tmp_path), "--total-steps", "0"])

@@ -29,7 +29,7 @@ def random_actions(masks: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 
 def check_step_contract(venv: TaskAllocVecEnv, obs, rewards=None, dones=None, infos=None) -> None:
-    assert venv.observation_space["observation"].contains(obs["observation"][0].astype(np.float64))
+    assert venv.observation_space["observation"].contains(obs["observation"][0])
     for key in ("observation", "action_mask"):
         assert obs[key].shape == (venv.num_envs, *venv.observation_space[key].shape)
         assert obs[key].dtype == venv.observation_space[key].dtype
@@ -80,12 +80,14 @@ def test_masks_for_maskable_ppo_match_observations_and_are_enforced():
     assert masks.shape == (venv.num_envs, venv.action_space.n) and masks.dtype == bool
     np.testing.assert_array_equal(masks, obs["action_mask"].astype(bool))
     assert masks[:, 0].all() and masks[:, 1:].any()
-    # the adapter sends actions unchanged: a masked-out action reaches the env, which raises
+    # the adapter sends actions unchanged: a masked-out action reaches the env, which raises under "raise"
+    strict = make(n_copies=2, invalid_action="raise")
+    strict.reset()
     invalid = np.zeros(venv.num_envs, dtype=np.int64)
     row = int(np.flatnonzero(~masks.all(axis=1))[0])
     invalid[row] = int(np.flatnonzero(~masks[row])[0])
     with pytest.raises(InvalidActionError):
-        venv.step(invalid)
+        strict.step(invalid)
 
 
 def test_episode_end_reports_once_per_copy_and_resets():
