@@ -36,6 +36,7 @@ from evaluation.report import (
 from evaluation.stats import format_p, mean_sd
 from taskalloc_env import TaskAllocConfig, resolve_config, resources
 from taskalloc_env.env import TaskAllocEnv
+from taskalloc_env.errors import ConfigError
 
 BASELINES = ("random", "cbba", "cbga", "cbga+tq", "cbga+tb", "cbgabi", "sgama")
 REFERENCE = "CBGA"
@@ -163,17 +164,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--set", dest="overrides", type=_override, action="append", default=[],
                         metavar="FIELD=VALUE", help="config override, e.g. --set agents_per_task=1 (repeatable)")
     parser.add_argument("--out", type=Path, default=None, help="write compare.md/.csv/.png and episodes.csv here")
-    parser.add_argument("--jobs", type=int, default=1, help=f"worker processes (this machine: {default_jobs()})")
+    parser.add_argument("--jobs", type=int, default=default_jobs(),
+                        help=f"worker processes (default: every core, {default_jobs()} here)")
     parser.add_argument("--learned", action="append", default=None, metavar="NAME_OR_PATH",
                         help="a learned policy to include: a committed model's name or a checkpoint path "
                              "(repeatable; default: every committed model in models/)")
     parser.add_argument("--no-learned", action="store_true", help="leave learned policies out")
-    parser.add_argument("--progress", action="store_true", help="show a progress bar")
+    parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True,
+                        help="show a progress bar on stderr (default: yes)")
 
 
 def run(args: argparse.Namespace) -> int:
     if args.episodes < 2:
-        raise SystemExit("--episodes must be at least 2 (standard deviations and paired tests need two seeds)")
+        raise ConfigError(f"--episodes: got {args.episodes}; allowed: an integer >= 2 (standard deviations and paired "
+                          "tests need two seeds)")
+    if args.jobs < 1:
+        raise ConfigError(f"--jobs: got {args.jobs}; allowed: an integer >= 1")
     started = time.perf_counter()
     learned = [] if args.no_learned else args.learned
     text = compare(args.scenario, args.episodes, dict(args.overrides), args.jobs, args.out, learned, args.progress)

@@ -7,6 +7,7 @@ A command entry point, not a module of the library: nothing imports it, so it ma
 from __future__ import annotations
 
 from evaluation.__main__ import main
+from taskalloc_env.errors import run_cli
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_cli(main))

@@ -1,15 +1,31 @@
 #!/usr/bin/env bash
 # Create .venv and install the project with its training and test extras.
-# Torch: the CPU build is pinned first (a bare "torch" requirement would pull a CUDA build of several GB);
-# pyproject.toml keeps a range that this pin satisfies, so pip installs nothing more for it.
+#
+# Torch goes in first, pinned, because a bare "torch" requirement pulls a CUDA build of several GB; pyproject.toml
+# keeps a range this pin satisfies, so pip installs nothing more for it. Choose where it comes from with:
+#   TORCH_VERSION   (default 2.13.0)
+#   TORCH_INDEX_URL (e.g. https://download.pytorch.org/whl/cpu for the CPU-only wheels; default: pip's own index)
+# After the install the script checks that no CUDA packages (nvidia-*) came in, and fails if they did.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PYTHON="${PYTHON:-python3}"
+TORCH_VERSION="${TORCH_VERSION:-2.13.0}"
 if [ ! -x .venv/bin/python ]; then
   "$PYTHON" -m venv .venv
 fi
 .venv/bin/python -m pip install --quiet --upgrade pip
 if ! .venv/bin/python -c "import torch" 2>/dev/null; then
-  .venv/bin/python -m pip install --quiet "torch==2.13.0"
+  if [ -n "${TORCH_INDEX_URL:-}" ]; then
+    .venv/bin/python -m pip install --quiet --index-url "$TORCH_INDEX_URL" "torch==$TORCH_VERSION"
+  else
+    .venv/bin/python -m pip install --quiet "torch==$TORCH_VERSION"
+  fi
 fi
 .venv/bin/python -m pip install --quiet -e ".[train,dev]"
+cuda=$(.venv/bin/python -m pip list --format=freeze 2>/dev/null | grep -i '^nvidia-' || true)
+if [ -n "$cuda" ]; then
+  echo "setup: CUDA packages were installed (a CUDA build of torch?):" >&2
+  echo "$cuda" >&2
+  echo "setup: remove .venv and set TORCH_INDEX_URL=https://download.pytorch.org/whl/cpu for the CPU build" >&2
+  exit 1
+fi

@@ -300,9 +300,9 @@ def test_step_before_reset_is_a_clear_error():
 def test_infos_carry_the_action_mask():
     e = TaskAllocEnv(n_agents=3, n_tasks=4)
     obs, infos = e.reset(seed=1)
-    for agent in e.agents:
-        np.testing.assert_array_equal(infos[agent]["action_mask"], obs[agent]["action_mask"])
-        assert infos[agent]["action_mask"].dtype == np.int8
+    for name in e.agents:
+        np.testing.assert_array_equal(infos[name]["action_mask"], obs[name]["action_mask"])
+        assert infos[name]["action_mask"].dtype == np.int8
     assert obs["uav_0"]["observation"].dtype == np.float32 and e.state().dtype == np.float32
     wide = TaskAllocEnv(n_agents=3, n_tasks=4, dtype="float64")
     assert wide.reset(seed=1)[0]["uav_0"]["observation"].dtype == np.float64

@@ -11,10 +11,9 @@ import pytest
 from scipy import stats as sps
 
 from evaluation import experiments
-from taskalloc_env import resources
 from evaluation.episodes import Episode, check_pairing, fingerprint, run_episode, run_episodes
 from evaluation.stats import mean_sd, paired, paired_t_pvalue, share_better, share_tied, wilcoxon_pvalue
-from taskalloc_env import TaskAllocEnv, resolve_config
+from taskalloc_env import TaskAllocEnv, resolve_config, resources
 
 SMALL = {"n_agents": 4, "n_tasks": 6, "agents_per_task": 2, "start_time_range": [0.0, 30.0]}
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import re
 
 import numpy as np
 import pytest
@@ -74,7 +75,7 @@ def test_behaviour_cloning_then_ppo_and_a_mixed_team(tmp_path):
     assert summary["bc"]["validation"]["score"] > 0.9 * summary["ppo"]["baseline_score"]
     with pytest.raises(ConfigError, match="overlap"):
         train.load_config(["--seed", "9999", "--n-envs", "4"])
-    with pytest.raises(ConfigError, match="'algo': got 'dqn'; allowed: maskable_ppo | ppo"):
+    with pytest.raises(ConfigError, match=re.escape("'algo': got 'dqn'; allowed: maskable_ppo | ppo")):
         train.load_config(["--algo", "dqn"])
     # a second run into the same folder would replace the model: refused unless asked
     with pytest.raises(ConfigError, match="--overwrite"):
