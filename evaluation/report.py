@@ -17,6 +17,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from scipy import stats
 
 from evaluation.stats import PairedComparison, format_mean_sd, format_p, paired
 
@@ -109,34 +110,46 @@ def read_csv(path: Path) -> list[dict[str, Any]]:
 # -- plots ---------------------------------------------------------------------------------------------------------
 def bar_and_differences(path: Path, cells: Mapping[str, Sequence[Mapping[str, Any]]], baseline: str | None,
                         metric: str = "score", title: str = "") -> None:
-    """Left: mean ± sd bars per series. Right: per-seed paired differences against ``baseline`` (box + points)."""
+    """Left: each series' mean with its 95 % t-interval (the axis spans the data, not 0). Right: per-seed paired
+    differences against ``baseline`` with their mean and 95 % t-interval, so a few per cent show."""
     labels = list(cells)
     data = [values(cells[k], metric) for k in labels]
     others = [k for k in labels if baseline in cells and k != baseline and seeds(cells[k]) == seeds(cells[baseline])]
-    fig, axes = plt.subplots(1, 2 if others else 1, figsize=(11 if others else 6, 4.2), squeeze=False)
+    fig, axes = plt.subplots(1, 2 if others else 1, figsize=(12 if others else 6, 4.4), squeeze=False)
+    name = METRIC_LABELS.get(metric, metric)
     ax = axes[0, 0]
-    means = [np.nanmean(x) if np.isfinite(x).any() else 0.0 for x in data]
-    sds = [np.nanstd(x, ddof=1) if np.isfinite(x).sum() > 1 else 0.0 for x in data]
-    ax.bar(range(len(labels)), means, yerr=sds, capsize=4, color="tab:blue", alpha=0.8)
+    for n, x in enumerate(data):
+        finite = x[np.isfinite(x)]
+        if finite.size:
+            ax.errorbar(n, finite.mean(), yerr=_half_ci(finite), fmt="o", capsize=5, color="tab:blue")
     ax.set_xticks(range(len(labels)), labels, rotation=30, ha="right")
-    ax.set_ylabel(f"{METRIC_LABELS.get(metric, metric)} (mean ± sd)")
-    ax.set_title(textwrap.fill(title or f"{METRIC_LABELS.get(metric, metric)}, {len(data[0])} seeds", 60), fontsize=9)
+    ax.set_ylabel(f"{name} (mean, 95 % CI)")
+    ax.grid(axis="y", alpha=0.3)
+    ax.set_title(textwrap.fill(title or f"{name}, {len(data[0])} seeds", 60), fontsize=9)
     if others:
         ax = axes[0, 1]
         base = values(cells[baseline], metric)
         diffs = [values(cells[k], metric) - base for k in others]
         ax.axhline(0, color="grey", lw=0.8)
-        ax.boxplot(diffs, showfliers=False)
         rng = np.random.default_rng(0)
-        for n, d in enumerate(diffs, start=1):
-            ax.scatter(n + rng.uniform(-0.15, 0.15, d.size), d, s=8, alpha=0.5, color="tab:orange")
-        ax.set_xticks(range(1, len(others) + 1), others, rotation=30, ha="right")
-        ax.set_ylabel(f"per-seed {METRIC_LABELS.get(metric, metric)} − {baseline}")
-        ax.set_title(f"paired differences vs {baseline}")
+        for n, d in enumerate(diffs):
+            ax.scatter(n + rng.uniform(-0.2, 0.2, d.size), d, s=8, alpha=0.35, color="tab:orange")
+            ax.errorbar(n, d.mean(), yerr=_half_ci(d), fmt="D", capsize=6, color="k", zorder=3)
+        ax.set_xticks(range(len(others)), others, rotation=30, ha="right")
+        ax.set_ylabel(f"{name} − {baseline}, per seed (mean, 95 % CI)")
+        ax.grid(axis="y", alpha=0.3)
+        ax.set_title(f"paired differences vs {baseline}", fontsize=9)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _half_ci(x: np.ndarray) -> float:
+    """Half-width of the 95 % t-interval of the mean (0 for fewer than two values)."""
+    if x.size < 2:
+        return 0.0
+    return float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / np.sqrt(x.size))
 
 
 def sweep_plot(path: Path, xs: Sequence[Any], series: Mapping[str, Sequence[Sequence[Mapping[str, Any]]]],

@@ -317,16 +317,16 @@ class TaskAllocEnv(ParallelEnv):
         if self.render_mode == "ansi":
             return ansi_table(self.scenario, allocation)
         if self.render_mode == "rgb_array":
-            return rgb_array(self.scenario, allocation)
+            return rgb_array(self.scenario, allocation, self.config.units)
         if self.render_path is not None:
-            figure(self.scenario, allocation).savefig(self.render_path)
+            figure(self.scenario, allocation, units=self.config.units).savefig(self.render_path)
         elif _interactive_backend():
             import matplotlib.pyplot as plt
             if self._window is None:
                 self._window = plt.figure("taskalloc")
             self._window.clf()
             ax = self._window.add_subplot(1, 1, 1)
-            ax.imshow(rgb_array(self.scenario, allocation))
+            ax.imshow(rgb_array(self.scenario, allocation, self.config.units))
             ax.axis("off")
             plt.pause(0.001)
         return None

@@ -7,6 +7,7 @@ hatched when it is not valid), each agent a line through the tasks on its own pa
 
 from __future__ import annotations
 
+import matplotlib
 import numpy as np
 
 from taskalloc_env.allocation import Allocation
@@ -31,47 +32,78 @@ def ansi_table(scenario: Scenario, allocation: Allocation) -> str:
     return "\n".join(lines)
 
 
-def figure(scenario: Scenario, allocation: Allocation, title: str = ""):
-    """A matplotlib Figure of x position against time (Agg canvas, no display needed)."""
+UNITS = {"km_min": ("min", "km"), "raw": ("time units", "distance units")}   # per TaskAllocConfig.units
+LABEL_STEP = 9          # points between stacked task labels
+MAX_AGENT_KEYS = 12     # agents listed in the legend; more are summarised in one entry
+
+
+def figure(scenario: Scenario, allocation: Allocation, title: str = "", units: str = "km_min"):
+    """A matplotlib Figure of x position against time (Agg canvas, no display needed).
+
+    Each task is a bar over its start window at its x position, coloured by L_j; a valid task is solid, a task
+    that is not valid (too few members, missing equipment or prerequisites) is faded and hatched. Each agent is a
+    line from its start through the tasks on its own path.
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
-    fig = Figure(figsize=(8, 5), dpi=80)
+    time_unit, distance_unit = UNITS[units]
+    fig = Figure(figsize=(10, 6), dpi=90, layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
     levels = sorted(set(int(v) for v in scenario.task_agents))
-    colours = {lv: f"C{k % 10}" for k, lv in enumerate(levels)}
+    shades = np.linspace(0.45, 0.8, len(levels)) if len(levels) > 1 else [0.6]
+    colours = {lv: matplotlib.colormaps["Greys"](float(shade)) for lv, shade in zip(levels, shades)}
     valid = set(allocation.valid_tasks)
     finite_end = np.where(np.isfinite(scenario.task_end), scenario.task_end,
                           scenario.task_start + scenario.task_duration)
-    for j in range(scenario.n_tasks):
+    height = 0.02 * float(np.ptp(np.r_[scenario.task_pos[:, 0], scenario.agent_pos[:, 0]]) or 1.0)
+    placed: list[tuple[float, float, int]] = []
+    span = float(np.ptp(np.r_[scenario.task_start, finite_end]) or 1.0)
+    for j in np.argsort(scenario.task_start, kind="stable"):
         x = scenario.task_pos[j, 0]
-        ax.barh(x, finite_end[j] - scenario.task_start[j], left=scenario.task_start[j], height=0.08,
-                color=colours[int(scenario.task_agents[j])], alpha=0.8 if j in valid else 0.3,
-                hatch=None if j in valid else "//", edgecolor="k", linewidth=0.3)
-        ax.annotate(f"T{j}", (scenario.task_start[j], x), fontsize=6, xytext=(0, 4), textcoords="offset points")
+        ax.barh(x, finite_end[j] - scenario.task_start[j], left=scenario.task_start[j], height=height,
+                color=colours[int(scenario.task_agents[j])], alpha=0.85 if j in valid else 0.3,
+                hatch=None if j in valid else "///", edgecolor="k", linewidth=0.4)
+        # stack labels that would overlap an earlier one (close in both time and position)
+        level = sum(1 for t, y, _ in placed
+                    if abs(t - scenario.task_start[j]) < 0.04 * span and abs(y - x) < 3 * height)
+        placed.append((scenario.task_start[j], x, level))
+        ax.annotate(f"T{j}", (scenario.task_start[j], x), fontsize=7, xytext=(0, 4 + LABEL_STEP * level),
+                    textcoords="offset points")
     for i, (path, starts) in enumerate(zip(allocation.paths, allocation.start_times)):
-        if not path:
-            continue
-        times = [0.0]
-        xs = [scenario.agent_pos[i, 0]]
+        times, xs = [0.0], [scenario.agent_pos[i, 0]]
         for j, t in zip(path, starts):
             times += [t, t + scenario.task_duration[j]]
             xs += [scenario.task_pos[j, 0]] * 2
-        ax.plot(times, xs, "-", lw=0.8, color=f"C{(i + 3) % 10}", alpha=0.9)
-    for lv in levels:
-        ax.barh([], [], color=colours[lv], label=f"L={lv}")
-    ax.legend(loc="upper right", fontsize=7)
-    ax.set_xlabel("time")
-    ax.set_ylabel("x position")
-    ax.set_title(title or f"score {allocation.score:.1f}, {allocation.n_valid} valid tasks, "
+        ax.plot(times, xs, "-", lw=1.0, color=_agent_colour(i), alpha=0.9)
+        ax.plot(times[:1], xs[:1], "o", ms=3, color=_agent_colour(i))
+    task_keys = [Patch(facecolor=colours[lv], edgecolor="k", label=f"task, L_j = {lv}") for lv in levels]
+    task_keys += [Patch(facecolor="white", edgecolor="k", label="valid (solid)"),
+                  Patch(facecolor="white", edgecolor="k", hatch="///", alpha=0.5, label="not valid (faded, hatched)")]
+    n = scenario.n_agents
+    agent_keys = [Line2D([], [], color=_agent_colour(i), label=f"uav_{i}") for i in range(min(n, MAX_AGENT_KEYS))]
+    if n > MAX_AGENT_KEYS:
+        agent_keys.append(Line2D([], [], color="grey", label=f"… {n - MAX_AGENT_KEYS} more agents"))
+    fig.legend(handles=task_keys, loc="outside right upper", fontsize=8, title="tasks")
+    fig.legend(handles=agent_keys, loc="outside right lower", fontsize=8, title="agents (paths)")
+    ax.set_xlabel(f"time ({time_unit})")
+    ax.set_ylabel(f"x position ({distance_unit})")
+    ax.set_title(title or f"score {allocation.score:.1f}, {allocation.n_valid} of {scenario.n_tasks} tasks valid, "
                           f"round {allocation.counters.rounds}")
-    fig.tight_layout()
+    ax.grid(alpha=0.2)
     return fig
 
 
-def rgb_array(scenario: Scenario, allocation: Allocation) -> np.ndarray:
+def _agent_colour(i: int) -> tuple[float, ...]:
+    """Agents take qualitative colours (tab10, then tab20 beyond ten agents); tasks are shades of grey."""
+    return matplotlib.colormaps["tab10" if i < 10 else "tab20"](i % (10 if i < 10 else 20))
+
+
+def rgb_array(scenario: Scenario, allocation: Allocation, units: str = "km_min") -> np.ndarray:
     """The figure as an H × W × 3 uint8 array."""
-    fig = figure(scenario, allocation)
+    fig = figure(scenario, allocation, units=units)
     fig.canvas.draw()
     return np.asarray(fig.canvas.buffer_rgba())[:, :, :3].copy()
