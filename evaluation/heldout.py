@@ -7,8 +7,8 @@ Rows: random, CBGA, CBGABI (scripted, decentralised), SGAMA (centralised greedy)
 ``--learned LABEL=PATH`` checkpoint (default: the committed behaviour-cloning, PPO-from-scratch and BC + PPO
 models: ``models/train_small_bc/bc.json``, ``train_small`` and ``train_small_bc``).
 Each policy runs in an environment built with its ``env_overrides``; seed s is the same instance for
-every row (the instance is drawn at ``reset(seed=s)`` before any policy acts). Learned policies act greedily
-(arg-max of the masked logits).
+every row (the instance is drawn at ``reset(seed=s)`` before any policy acts). Learned policies act greedily: the
+most likely kind of action (pass, bid or quit), then its most likely action (``policies.learned.greedy_actions``).
 """
 
 from __future__ import annotations
@@ -98,10 +98,13 @@ def update_doc(path: Path, table: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> str:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--scenario", default="train_small")
-    parser.add_argument("--seed-start", type=int, default=TEST_SEEDS.start)
-    parser.add_argument("--episodes", type=int, default=len(TEST_SEEDS))
+    parser = argparse.ArgumentParser(prog="python -m evaluation.heldout", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenario", default="train_small", help="scenario name or YAML path (default train_small)")
+    parser.add_argument("--seed-start", type=int, default=TEST_SEEDS.start,
+                        help=f"first held-out seed (default {TEST_SEEDS.start})")
+    parser.add_argument("--episodes", type=int, default=len(TEST_SEEDS),
+                        help=f"number of held-out seeds (default {len(TEST_SEEDS)})")
     parser.add_argument("--learned", action="append", metavar="LABEL=PATH",
                         help="a checkpoint row (repeatable); default: the committed models")
     parser.add_argument("--json", type=Path, help="also write per-seed scores here")

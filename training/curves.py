@@ -18,13 +18,26 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from taskalloc_env.errors import run_cli
+from taskalloc_env.errors import ConfigError, run_cli
 
 
 def read_curve(path: Path) -> dict[str, list[float]]:
-    with open(path, newline="") as fh:
-        rows = list(csv.DictReader(fh))
+    try:
+        with open(path, newline="") as fh:
+            rows = list(csv.DictReader(fh))
+    except OSError as exc:
+        raise ConfigError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from None
+    if not rows or not {"timesteps", "score", "baseline_score"} <= set(rows[0]):
+        raise ConfigError(f"{str(path)!r} is not an eval.csv of python -m training.train (no evaluation rows)")
     return {key: [float(r[key]) for r in rows] for key in rows[0]}
+
+
+def curve_argument(text: str) -> tuple[str, Path]:
+    """``LABEL=EVAL_CSV``."""
+    label, sep, path = text.partition("=")
+    if not sep or not label or not path:
+        raise ConfigError(f"curve {text!r}: expected LABEL=EVAL_CSV, e.g. \"PPO=runs/x/eval.csv\"")
+    return label, Path(path)
 
 
 def plot(curves: list[tuple[str, Path]], out: Path, skip_untrained: bool = True) -> None:
@@ -48,11 +61,12 @@ def plot(curves: list[tuple[str, Path]], out: Path, skip_untrained: bool = True)
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("curves", nargs="+", metavar="LABEL=EVAL_CSV")
-    parser.add_argument("--out", type=Path, default=Path("docs/learning_curve.png"))
+    parser = argparse.ArgumentParser(prog="python -m training.curves", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("curves", nargs="+", metavar="LABEL=EVAL_CSV", help="a curve: its label and an eval.csv")
+    parser.add_argument("--out", type=Path, required=True, help="the PNG to write")
     args = parser.parse_args(argv)
-    plot([(item.split("=", 1)[0], Path(item.split("=", 1)[1])) for item in args.curves], args.out)
+    plot([curve_argument(item) for item in args.curves], args.out)
     print(f"wrote {args.out}")
 
 
