@@ -31,13 +31,13 @@ from taskalloc_env.allocation import Allocation, Counters
 from taskalloc_env.bidding import complete_groups, prerequisites_met
 from taskalloc_env.config import TaskAllocConfig
 from taskalloc_env.groups import admit
-from taskalloc_env.scenario import Scenario
+from taskalloc_env.scenario import Scenario, scenario_config
 from taskalloc_env.scoring import ScoringModel
 
 
 def sgama(scenario: Scenario, cfg: TaskAllocConfig | None = None) -> Allocation:
     """Solve ``scenario`` centrally with SGAMA; scored like ``env.evaluate()`` (``cfg`` gives the scoring options)."""
-    cfg = cfg or TaskAllocConfig(n_agents=scenario.n_agents, n_tasks=scenario.n_tasks)
+    cfg = cfg or scenario_config(scenario)
     model = ScoringModel.from_config(scenario, cfg)
     n, m = scenario.n_agents, scenario.n_tasks
     match = scenario.eligible()
@@ -100,7 +100,7 @@ def exact(scenario: Scenario, cfg: TaskAllocConfig | None = None) -> Allocation:
     if scenario.n_agents > MAX_AGENTS or scenario.n_tasks > MAX_TASKS:
         raise ValueError(f"exact() enumerates; it takes at most {MAX_AGENTS} agents and {MAX_TASKS} tasks, "
                          f"got {scenario.n_agents} x {scenario.n_tasks}")
-    cfg = cfg or TaskAllocConfig(n_agents=scenario.n_agents, n_tasks=scenario.n_tasks)
+    cfg = cfg or scenario_config(scenario)
     model = ScoringModel.from_config(scenario, cfg)
     n, m = scenario.n_agents, scenario.n_tasks
     need = scenario.task_agents

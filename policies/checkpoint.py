@@ -30,15 +30,13 @@ from importlib.resources.abc import Traversable
 from pathlib import Path
 from typing import Any
 
+from taskalloc_env.config import PROTOCOL_FIELDS
 from taskalloc_env.errors import ConfigError, run_cli
 
 FORMAT, VERSION = "taskalloc-checkpoint", 1
 MAX_JSON_BYTES = 1 << 20
 MAX_SIZE = 1 << 16              # largest integer size a network may be built with
 MAX_PARAMETERS = 50_000_000     # largest actor a checkpoint may describe (refused before anything is allocated)
-# config fields that describe the consensus protocol rather than the scenario (taskalloc_env.config docstring)
-PROTOCOL_FIELDS = ("cbba_table", "prereq_mode", "release_order", "task_quitting", "delta", "reset_on", "quit_block",
-                   "require_known_capacity", "consensus", "max_bundle", "max_rounds")
 
 
 class CheckpointError(ConfigError):

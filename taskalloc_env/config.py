@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,9 @@ import yaml
 from taskalloc_env import resources
 from taskalloc_env.errors import ConfigError
 
+# every real-valued field lies within ±MAX_MAGNITUDE: far beyond any sensible unit, and small enough that
+# distances, times and their sums stay finite (1e308 would overflow to inf and NaN)
+MAX_MAGNITUDE = 1e9
 MAX_FILE_BYTES = 1 << 20       # config files are a few hundred bytes; anything beyond 1 MiB is refused unread
 
 
@@ -143,6 +147,12 @@ class TaskAllocConfig:
 
 
 _FIELDS = {f.name: f for f in dataclasses.fields(TaskAllocConfig)}
+# the three groups of fields (the class docstring): what generates an instance, how it is scored, how agents agree
+GENERATION_FIELDS = ("n_agents", "n_tasks", "agents_per_task", "arena", "speed", "units", "reward", "time_discount",
+                     "distance_discount", "window", "duration", "start_time_range", "agent_types", "agent_type_counts",
+                     "task_mix", "prerequisites")
+SCORING_FIELDS = ("distance_cost", "prereq_timing", "reward_split", "conflict_policy", "marginal_gain")
+PROTOCOL_FIELDS = tuple(name for name in _FIELDS if name not in GENERATION_FIELDS + SCORING_FIELDS)
 
 
 def _fail(field: str, value: Any, allowed: str) -> None:
@@ -157,9 +167,10 @@ def _check_positive_int(name: str, value: Any, minimum: int = 1) -> None:
 def _check_number(name: str, value: Any, minimum: float = 0.0, strict: bool = False) -> None:
     ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
     if ok:
-        ok = value > minimum if strict else value >= minimum
+        ok = (value > minimum if strict else value >= minimum) and abs(value) <= MAX_MAGNITUDE
     if not ok:
-        _fail(name, value, f"a finite number {'>' if strict else '>='} {minimum}")
+        low = "" if minimum == -math.inf else f"{'>' if strict else '>='} {minimum} and "
+        _fail(name, value, f"a number {low}within ±{MAX_MAGNITUDE:g}")
 
 
 def _validate(cfg: TaskAllocConfig) -> None:
@@ -170,6 +181,10 @@ def _validate(cfg: TaskAllocConfig) -> None:
         _fail("agents_per_task", cfg.agents_per_task, "an integer >= 1 or a non-empty list of them")
     for value in apt:
         _check_positive_int("agents_per_task", value)
+    if cfg.task_mix is None and max(apt) > cfg.n_agents:
+        which = "no task" if min(apt) > cfg.n_agents else f"no task needing more than {cfg.n_agents} agents"
+        warnings.warn(f"agents_per_task {cfg.agents_per_task} with n_agents = {cfg.n_agents}: {which} can ever be "
+                      "completed (such tasks are never biddable)", stacklevel=4)
     if len(cfg.arena) != 3:
         _fail("arena", cfg.arena, "three sizes [W, W, H]")
     for size in cfg.arena:
@@ -178,6 +193,8 @@ def _validate(cfg: TaskAllocConfig) -> None:
         _check_number(name, getattr(cfg, name), strict=True)
     for name in ("time_discount", "distance_discount", "duration"):
         _check_number(name, getattr(cfg, name))
+    if len(cfg.start_time_range) != 2:
+        _fail("start_time_range", cfg.start_time_range, "two times [earliest, latest]")
     lo, hi = cfg.start_time_range
     _check_number("start_time_range", lo, minimum=-math.inf)
     _check_number("start_time_range", hi, minimum=lo)
@@ -227,6 +244,8 @@ def _validate(cfg: TaskAllocConfig) -> None:
         chains = cfg.prerequisites
         _check_positive_int("prerequisites.chains", chains.chains)
         _check_positive_int("prerequisites.length", chains.length, minimum=2)
+        if not isinstance(chains.followup_window, bool):
+            _fail("prerequisites.followup_window", chains.followup_window, "true | false")
         if chains.chains * chains.length > cfg.n_tasks:
             _fail("prerequisites", dataclasses.asdict(chains),
                   f"chains * length <= n_tasks = {cfg.n_tasks}")
@@ -266,7 +285,10 @@ def _normalise(name: str, value: Any) -> Any:
                 mixes.append(entry)
                 continue
             _check_record(name, entry, ("count", "agents", "equipment"), required="count")
-            equipment = tuple(entry.get("equipment", ()))  # "AB" and ["A", "B"] both name two items
+            equipment = entry.get("equipment", ())
+            if not isinstance(equipment, (str, list, tuple)) or not all(isinstance(e, str) for e in equipment):
+                _fail("task_mix.equipment", equipment, "a list of type names, or a string of one-letter names")
+            equipment = tuple(equipment)  # "AB" and ["A", "B"] both name two items
             mixes.append(TaskMix(count=entry["count"], agents=entry.get("agents"), equipment=equipment))
         return tuple(mixes)
     if name == "prerequisites" and value is not None:

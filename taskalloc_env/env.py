@@ -50,11 +50,11 @@ from pettingzoo import ParallelEnv
 
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import TaskAllocConfig, max_required_agents, resolve_config, round_bound
-from taskalloc_env.errors import InvalidActionError
+from taskalloc_env.errors import ConfigError, InvalidActionError
 from taskalloc_env.observation import ObservationBuilder, state_vector
 from taskalloc_env.protocol import Protocol
 from taskalloc_env.render import ansi_table, figure, rgb_array
-from taskalloc_env.scenario import Scenario, generate
+from taskalloc_env.scenario import Scenario, generate, scenario_config
 
 PASS = 0
 INVALID_ACTION_MODES = ("noop", "raise")
@@ -73,26 +73,23 @@ class TaskAllocEnv(ParallelEnv):
                  **overrides: Any) -> None:
         if isinstance(scenario, Scenario):
             self.fixed_scenario: Scenario | None = scenario
-            counts = {"n_agents": scenario.n_agents, "n_tasks": scenario.n_tasks}
-            clash = {k: v for k, v in counts.items() if k in overrides and overrides[k] != v}
-            if clash:
-                raise ValueError(f"overrides {clash} contradict the fixed scenario's {counts}")
-            self.config = resolve_config("default", **{**overrides, **counts})
+            self.config = scenario_config(scenario, **overrides)
         else:
             self.fixed_scenario = None
             self.config = resolve_config(scenario, **overrides)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']} or None")
+            raise ConfigError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']} or None")
         if invalid_action not in INVALID_ACTION_MODES:
-            raise ValueError(f"invalid_action {invalid_action!r} is not one of {INVALID_ACTION_MODES}")
+            raise ConfigError(f"invalid_action {invalid_action!r} is not one of {INVALID_ACTION_MODES}")
         if dtype not in DTYPES:
-            raise ValueError(f"dtype {dtype!r} is not one of {DTYPES}")
+            raise ConfigError(f"dtype {dtype!r} is not one of {DTYPES}")
         self.dtype = np.dtype(dtype)
         if max_cycles is not None and (isinstance(max_cycles, bool) or not isinstance(max_cycles, int)
                                        or max_cycles < 1):
-            raise ValueError(f"max_cycles must be a positive integer or None, got {max_cycles!r}")
-        if not reward_scale > 0:
-            raise ValueError(f"reward_scale must be > 0, got {reward_scale!r}")
+            raise ConfigError(f"max_cycles must be a positive integer or None, got {max_cycles!r}")
+        if isinstance(reward_scale, bool) or not isinstance(reward_scale, (int, float)) \
+                or not 0 < reward_scale < np.inf:
+            raise ConfigError(f"reward_scale must be a finite number > 0, got {reward_scale!r}")
         self.render_mode = render_mode
         self.render_path = Path(render_path) if render_path is not None else None
         self.max_cycles = max_cycles

@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import warnings
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
-from taskalloc_env.config import TaskAllocConfig, type_counts
+from taskalloc_env.config import MAX_MAGNITUDE, TaskAllocConfig, type_counts
 from taskalloc_env.groups import Equipment
 
 NO_DEADLINE = np.inf
@@ -86,6 +88,19 @@ class Scenario:
                 raise ValueError(f"scenario array {name} has shape {got}, expected {want}")
         if n == 0 or m == 0:
             raise ValueError(f"a scenario needs at least one agent and one task (got {n} agents, {m} tasks)")
+        finite = {"agent_pos": self.agent_pos, "agent_speed": self.agent_speed, "task_pos": self.task_pos,
+                  "task_reward": self.task_reward, "task_start": self.task_start, "task_duration": self.task_duration}
+        for name, array in finite.items():
+            bad = ~np.isfinite(array) | (np.abs(np.nan_to_num(array)) > MAX_MAGNITUDE)
+            if bad.any():
+                raise ValueError(f"scenario array {name} holds {array[bad].tolist()[:3]}: every value must be a finite "
+                                 f"number within ±{MAX_MAGNITUDE:g}")
+        if np.isnan(self.task_end).any() or (self.task_end == -np.inf).any():
+            raise ValueError("task windows must end at a number or +inf (open), not NaN or -inf")
+        for name in ("time_discount", "distance_discount"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and 0 <= value <= MAX_MAGNITUDE):
+                raise ValueError(f"scenario {name} must be a finite number in [0, {MAX_MAGNITUDE:g}], got {value!r}")
         if np.any(self.agent_speed <= 0):
             raise ValueError(f"agent speeds must be > 0, got {self.agent_speed.tolist()}")
         if np.any(self.task_agents < 1):
@@ -172,6 +187,10 @@ class Scenario:
             equipment_names = seen
         names = tuple(equipment_names)
         index = {name: e for e, name in enumerate(names)}
+        for kind, records, record_type in (("agent", agents, Agent), ("task", tasks, Task)):
+            for k, record in enumerate(records):
+                _check_record(kind, k, record, record_type)
+            _warn_duplicates(kind, records)
         for record in [*agents, *tasks]:
             unknown = [e for e in record.equipment if e not in index]
             if unknown:
@@ -210,6 +229,63 @@ class Scenario:
             equipment_names=names,
             arena=tuple(arena),
         )
+
+
+def scenario_config(scenario: Scenario, base: str = "default", **overrides: Any) -> TaskAllocConfig:
+    """The config of a fixed scenario: ``base``'s scoring and protocol options, its counts and L_j values.
+
+    Fields that generate instances cannot apply to a fixed scenario; overriding one raises ``ConfigError``.
+    """
+    from taskalloc_env.config import GENERATION_FIELDS, resolve_config
+    from taskalloc_env.errors import ConfigError
+
+    levels = tuple(sorted({int(v) for v in scenario.task_agents}))
+    counts = {"n_agents": scenario.n_agents, "n_tasks": scenario.n_tasks,
+              "agents_per_task": levels[0] if len(levels) == 1 else levels}
+
+    def same(key: str, value: Any) -> bool:
+        return key in counts and (value == counts[key] or (isinstance(value, (list, tuple))
+                                                           and tuple(sorted(set(value))) == levels))
+
+    moot = sorted(k for k in overrides if k in GENERATION_FIELDS and not same(k, overrides[k]))
+    if moot:
+        raise ConfigError(f"overrides {moot} generate instances and cannot apply to a fixed Scenario; set them on "
+                          "its agents and tasks (scoring and protocol options may be overridden)")
+    return resolve_config(base, **{**overrides, **counts})
+
+
+def _check_record(kind: str, k: int, record: Agent | Task, cls: type) -> None:
+    """An explicit agent or task has the declared types: numbers are numbers, counts are integers (no silent casts)."""
+    if not isinstance(record, cls):
+        raise ValueError(f"{kind} {k} is a {type(record).__name__}, not a {cls.__name__}")
+    if not (isinstance(record.position, (tuple, list)) and len(record.position) == 3
+            and all(_is_number(v) for v in record.position)):
+        raise ValueError(f"{kind} {k}: position {record.position!r} must be three numbers (x, y, z)")
+    numbers = ("speed",) if kind == "agent" else ("reward", "start", "end", "duration")
+    for field in numbers:
+        if not _is_number(getattr(record, field)):
+            raise ValueError(f"{kind} {k}: {field} {getattr(record, field)!r} must be a number")
+    if not (isinstance(record.equipment, (tuple, list)) and all(isinstance(e, str) for e in record.equipment)):
+        raise ValueError(f"{kind} {k}: equipment {record.equipment!r} must be a tuple of item names")
+    if kind == "task":
+        if isinstance(record.agents, bool) or not isinstance(record.agents, (int, np.integer)) or record.agents < 1:
+            raise ValueError(f"task {k}: agents {record.agents!r} must be an integer >= 1 (L_j)")
+        if not all(isinstance(p, (int, np.integer)) and not isinstance(p, bool) for p in record.prerequisites):
+            raise ValueError(f"task {k}: prerequisites {record.prerequisites!r} must be task ids (integers)")
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+
+
+def _warn_duplicates(kind: str, records: Sequence[Agent | Task]) -> None:
+    """Identical agents or tasks are allowed (two UAVs on one base, two equal jobs) but worth a word."""
+    seen: dict[Agent | Task, int] = {}
+    for k, record in enumerate(records):
+        if record in seen:
+            warnings.warn(f"{kind}s {seen[record]} and {k} are identical; allowed, and exact ties between them go to "
+                          "the rule of the tie (see docs/decisions.md)", stacklevel=4)
+        seen.setdefault(record, k)
 
 
 def _has_cycle(prereqs: np.ndarray) -> bool:

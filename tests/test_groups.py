@@ -9,6 +9,7 @@ Random tables, bids, equipment and L_j drive both sides.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -46,6 +47,7 @@ def tables(draw):
     return scenario, i, table, gains
 
 
+@pytest.mark.filterwarnings("ignore:tasks .* are identical")     # identical tasks are drawn on purpose
 @settings(max_examples=400, deadline=None)
 @given(tables(), st.data())
 def test_bid_mask_and_merge_admit_the_same_bids(case, data):

@@ -22,10 +22,11 @@ from taskalloc_env.groups import Equipment
 from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.network import CommGraph
 from taskalloc_env.protocol import Protocol, ProtocolError
+from taskalloc_env.scenario import scenario_config
 
 
 def protocol(s, **options) -> Protocol:
-    return Protocol(s, TaskAllocConfig(n_agents=s.n_agents, n_tasks=s.n_tasks, **options))
+    return Protocol(s, scenario_config(s, **options))
 
 
 def line_positions(n: int, spacing: float = 1.0) -> np.ndarray:

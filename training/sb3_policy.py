@@ -22,9 +22,9 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
 from policies import checkpoint
-from policies.checkpoint import PROTOCOL_FIELDS
 from policies.learned import LearnedPolicy, resolve
 from policies.networks import MlpActor, PoolingActor, PoolingEncoder, mlp, split_tasks
+from taskalloc_env.config import PROTOCOL_FIELDS
 from taskalloc_env.observation import TASK_FEATURES, ObservationLayout
 
 BODIES = ("pooling", "mlp")
