@@ -26,8 +26,9 @@ Constructor arguments: ``scenario`` (a name from ``configs/scenarios``, a YAML p
 :class:`~taskalloc_env.config.TaskAllocConfig`, a mapping, or a fixed :class:`~taskalloc_env.scenario.Scenario`),
 ``max_cycles`` (steps before truncation; None: only the round bound), ``render_mode`` (``ansi``, ``rgb_array``,
 ``human``), ``invalid_action`` (``raise``: bad input raises; ``noop``: it becomes a pass, flagged in infos),
-``reward_scale`` (rewards are Δscore / reward_scale), ``render_path`` (where ``human`` saves its figure; None shows
-it), and any config field as a keyword override (``n_agents=10, n_tasks=20, agents_per_task=4, comm_range=None``).
+``reward_scale`` (rewards are Δscore / reward_scale), ``render_path`` (where ``human`` saves its figure: at the end of
+every episode and on each ``render()`` call; None shows it in a window, redrawn every step), and any config field
+as a keyword override (``n_agents=10, n_tasks=20, agents_per_task=4, comm_range=None``).
 
 Observation: agent i's own features and, per task, features of *its own* table (marginal gain, L_j, members,
 lowest member bid, group total, displaced bid, in bundle, quit before, rounds since the group changed, equipment
@@ -38,7 +39,6 @@ return equals ``evaluate().score / reward_scale``.
 from __future__ import annotations
 
 import dataclasses
-import functools
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, ClassVar
@@ -52,7 +52,7 @@ from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import TaskAllocConfig, max_required_agents, resolve_config, round_bound
 from taskalloc_env.errors import ConfigError, InvalidActionError
 from taskalloc_env.observation import ObservationBuilder, state_vector
-from taskalloc_env.protocol import Protocol
+from taskalloc_env.protocol import Protocol, check_memory
 from taskalloc_env.render import ansi_table, figure, rgb_array
 from taskalloc_env.scenario import Scenario, generate, scenario_config
 
@@ -70,7 +70,7 @@ class TaskAllocEnv(ParallelEnv):
     def __init__(self, scenario: str | Path | TaskAllocConfig | Mapping[str, Any] | Scenario = "default",
                  max_cycles: int | None = None, render_mode: str | None = None, invalid_action: str = "noop",
                  reward_scale: float = 1.0, render_path: str | Path | None = None, dtype: str = "float32",
-                 **overrides: Any) -> None:
+                 memory_limit_gb: float | None = None, **overrides: Any) -> None:
         if isinstance(scenario, Scenario):
             self.fixed_scenario: Scenario | None = scenario
             self.config = scenario_config(scenario, **overrides)
@@ -96,6 +96,7 @@ class TaskAllocEnv(ParallelEnv):
         self.invalid_action = invalid_action
         self.reward_scale = float(reward_scale)
         n, m = self.config.n_agents, self.config.n_tasks
+        check_memory(n, m, self.config.max_bundle, memory_limit_gb)      # before anything of that size exists
         self.possible_agents = [f"uav_{i}" for i in range(n)]
         self.agent_index = {a: i for i, a in enumerate(self.possible_agents)}
         self.agents: list[str] = []
@@ -124,12 +125,12 @@ class TaskAllocEnv(ParallelEnv):
         self.state_space = spaces.Box(-np.inf, np.inf, (state_size,), dtype=self.dtype)
 
     # -- spaces ------------------------------------------------------------------------------------------------
-    @functools.cache  # noqa: B019 - one space object per agent, as parallel_api_test requires
+    # every agent shares one space object, built once per env: the same object on every call, as parallel_api_test
+    # requires, with no cache that would keep the env alive
     def observation_space(self, agent: str) -> spaces.Dict:
         self._check_agent_name(agent)
         return self._observation_space
 
-    @functools.cache  # noqa: B019
     def action_space(self, agent: str) -> spaces.Discrete:
         self._check_agent_name(agent)
         return self._action_space
@@ -213,7 +214,9 @@ class TaskAllocEnv(ParallelEnv):
         if terminated or truncated:
             self._done = True
             self.agents = []
-        if self.render_mode == "human":
+        # human mode redraws its window every step (Gymnasium's convention); saving a file every step would cost a
+        # figure per step, so with render_path the file is written at the end of the episode and on render() calls
+        if self.render_mode == "human" and (self.render_path is None or not self.agents):
             self.render()
         return observations, rewards, terminations, truncations, infos
 

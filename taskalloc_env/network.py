@@ -8,6 +8,8 @@ multi-hop; D (the diameter, the largest over connected components) bounds how ma
 from __future__ import annotations
 
 import numpy as np
+from scipy.sparse import csr_array
+from scipy.sparse.csgraph import connected_components, shortest_path
 
 
 class CommGraph:
@@ -25,10 +27,16 @@ class CommGraph:
         self.adjacency.setflags(write=False)
         self.neighbours = [np.flatnonzero(adjacency[i]) for i in range(n)]
         self.degree = adjacency.sum(axis=1)
-        self.hops = _hop_distances(adjacency)
+        graph = csr_array(adjacency)
+        # breadth-first search from every agent: O(N · links), not the O(N³) of boolean matrix powers
+        self.hops = np.ones((n, n)) - np.eye(n) if comm_range is None else \
+            shortest_path(graph, method="D", unweighted=True, directed=False)
         finite = self.hops[np.isfinite(self.hops)]
         self.diameter = int(finite.max()) if finite.size else 0
-        self.component = _components(self.hops)
+        labels = connected_components(graph, directed=False)[1]
+        lowest = np.full(labels.max(initial=-1) + 1, n)
+        np.minimum.at(lowest, labels, np.arange(n))
+        self.component = lowest[labels]          # component label per agent: the lowest id in its component
         # inbox position t of every receiver with more than t neighbours, for vectorised rounds
         self.inbox = []
         for t in range(int(self.degree.max(initial=0))):
@@ -39,24 +47,3 @@ class CommGraph:
     @property
     def n_agents(self) -> int:
         return len(self.adjacency)
-
-
-def _hop_distances(adjacency: np.ndarray) -> np.ndarray:
-    """All-pairs hop counts by breadth-first search over boolean matrix powers (inf where unreachable)."""
-    n = len(adjacency)
-    hops = np.full((n, n), np.inf)
-    np.fill_diagonal(hops, 0)
-    frontier = np.eye(n, dtype=bool)
-    reached = frontier.copy()
-    step = 0
-    while frontier.any():
-        step += 1
-        frontier = (frontier.astype(np.int64) @ adjacency.astype(np.int64) > 0) & ~reached
-        hops[frontier] = step
-        reached |= frontier
-    return hops
-
-
-def _components(hops: np.ndarray) -> np.ndarray:
-    """Component label per agent: the lowest id it can reach."""
-    return np.argmax(np.isfinite(hops), axis=1)

@@ -13,6 +13,8 @@ run out (T − H_i[j] > δ, ``delta``). Which bids and quits to make is the poli
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from taskalloc_env.allocation import Counters
@@ -20,6 +22,7 @@ from taskalloc_env.bidding import BidView, bid_view
 from taskalloc_env.cbba_table import NONE
 from taskalloc_env.config import TaskAllocConfig, round_bound
 from taskalloc_env.consensus import Traffic, exchange
+from taskalloc_env.errors import ConfigError
 from taskalloc_env.knowledge import NEVER, LocalKnowledge
 from taskalloc_env.network import CommGraph
 from taskalloc_env.scenario import Scenario
@@ -28,6 +31,41 @@ from taskalloc_env.scoring import PathTable, Schedule, ScoringModel, TeamScore, 
 
 class ProtocolError(ValueError):
     """A decision the protocol does not allow (a bid that is not valid, a quit that is not allowed)."""
+
+
+def memory_estimate(n_agents: int, n_tasks: int, max_bundle: int | None = None) -> int:
+    """Bytes an episode of this size may hold at once (an upper estimate, float64 everywhere).
+
+    The local tables X_i[k][j] are N·N·M values; a round copies them about six times (the snapshot sent, the
+    merge's receiver blocks, the before/after tables of the convergence test). A batched gain computation holds ten
+    (N, P + 1, M) arrays for paths of up to P = max_bundle tasks; observations are N·22·M values, built three times.
+    """
+    n, m = int(n_agents), int(n_tasks)
+    p = min(m, int(max_bundle or m))
+    return 8 * (7 * n * n * m + 10 * n * m * (p + 1) + 70 * n * m)
+
+
+def available_memory() -> int:
+    """Bytes this machine can still give a process (Linux: MemAvailable; elsewhere physical memory)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def check_memory(n_agents: int, n_tasks: int, max_bundle: int | None, limit_gb: float | None) -> None:
+    """Refuse a size whose estimate exceeds ``limit_gb`` (default: the memory available now), before allocating."""
+    need = memory_estimate(n_agents, n_tasks, max_bundle)
+    limit = available_memory() if limit_gb is None else limit_gb * 2**30
+    if need > limit:
+        raise ConfigError(f"{n_agents} agents × {n_tasks} tasks need about {need / 2**30:.1f} GiB (local tables of "
+                          f"N·N·M values, see memory_estimate); the limit is {limit / 2**30:.1f} GiB "
+                          f"({'available now' if limit_gb is None else 'memory_limit_gb'}); pass memory_limit_gb= to "
+                          "raise it")
 
 
 class Protocol:
