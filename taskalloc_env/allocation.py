@@ -1,6 +1,6 @@
 """The allocation type every solver returns: paths with start times, groups, validity, score and traffic.
 
-``Allocation.from_paths`` scores each agent's own path with the shared scoring code (spec cbga §1.7), so the
+``Allocation.from_paths`` scores each agent's own path with the shared scoring code (``scoring.team_score``), so the
 environment's ``evaluate()``, the centralised greedy SGAMA and the exact optimum are compared on equal terms.
 """
 
