@@ -3,13 +3,13 @@
     python -m policies compare --scenario default --episodes 20 --out results/compare
 
 Rows: random, CBBA (only where every L_j = 1), CBGA, CBGA+TQ, CBGA+TB, CBGABI, the centralised greedy SGAMA
-(spec cbga §6.7; no rounds or messages) and, for every committed checkpoint ``models/<name>/model.json`` whose
-observation layout fits the scenario, the learned policy. Seed s is the same instance for every row (paired design,
-spec cbga §6.1). The table gives mean ± sd of the score (spec cbga §1.7), valid tasks, consensus rounds and
-messages received (``msgs / agent`` = messages / N_n, the thesis's per-agent communication steps), episodes that
-hit the round bound (kept, counted), and the paired comparison with CBGA (mean difference, paired t-test p-value,
-share of seeds won). ``--out DIR`` writes ``compare.md``, ``compare.csv`` (the table), ``episodes.csv`` and
-``compare.png`` (score bars with sd; per-seed differences against CBGA).
+(thesis §3.3.3, Alg 7; no rounds or messages) and, for every committed checkpoint ``models/<name>/model.json``
+whose observation layout fits the scenario, the learned policy. Seed s is the same instance for every row (paired
+design, thesis §5.3.1). The table gives mean ± sd of the score (``scoring.team_score``), valid tasks, consensus
+rounds and messages received (``msgs / agent`` = messages / N_n, the thesis's per-agent communication steps),
+episodes that hit the round bound (kept, counted), and the paired comparison with CBGA (mean difference, paired
+t-test p-value, share of seeds won). ``--out DIR`` writes ``compare.md``, ``compare.csv`` (the table),
+``episodes.csv`` and ``compare.png`` (score bars with sd; per-seed differences against CBGA).
 """
 
 from __future__ import annotations
@@ -127,7 +127,7 @@ def compare(scenario: str, episodes: int, overrides: dict[str, Any], jobs: int =
     table, records = summary(rows, [names[s] for s in solvers])
     setting = (f"Scenario `{scenario}`{''.join(f', {k}={v}' for k, v in overrides.items())}: {cfg.n_agents} agents, "
                f"{cfg.n_tasks} tasks, L_j = {_agents_text(cfg)}; {episodes} paired seeds (0–{episodes - 1}).")
-    legend = ("score = rewards of valid tasks − travel cost (spec cbga §1.7); messages = messages received in total "
+    legend = ("score = rewards of valid tasks − travel cost (thesis §5.3.1); messages = messages received in total "
               "(one per sender → receiver per round); msgs / agent = messages / N_n, the thesis's communication steps; "
               "not conv. = episodes that hit the round bound (kept in the means); SGAMA is centralised (no rounds or "
               f"messages). Δ, p (paired t-test) and beats (share of seeds with a higher score) are against "

@@ -2,11 +2,13 @@
 
     python -m evaluation.convergence [--seeds 50] [--max-rounds 100]
 
-CBBA's convergence and conflict-freedom rest on diminishing marginal gains (DMG, spec cbba §1.6). The ``leg``
+CBBA's convergence and conflict-freedom rest on diminishing marginal gains (DMG, Johnson §3.4.1 eq. (3.13);
+thesis eq. (2.5)). The ``leg``
 cost (γ × the detour an insertion adds) is not DMG: inserting a task next to j can shrink j's detour and raise its
-bid, so bids can cycle. ``from_start`` (γ × the straight distance from the agent's start, the CBBA code's fuel
-penalty the thesis's Matlab implementation was built on) keeps DMG. The table shows the share of runs that
-converge within ``--max-rounds`` rounds on the spec's common scenario (10 agents, 20 tasks).
+bid, so bids can cycle. ``from_start`` (γ × the straight distance from the agent's start, the fuel penalty of the
+public MIT CBBA Matlab code; the thesis says only that its Matlab implementation extends a CBBA implementation,
+§3.3.1) keeps DMG. The table shows the share of
+runs that converge within ``--max-rounds`` rounds on the thesis's test scenario (§3.3.2; 10 agents, 20 tasks).
 """
 
 from __future__ import annotations

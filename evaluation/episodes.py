@@ -2,13 +2,14 @@
 
 A *solver* is a policy name (``random``, ``cbba``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi``,
 ``learned:<checkpoint>``, see ``policies.make_policy``) or a centralised solver (``sgama``, ``exact``). Seed s
-generates the same scenario instance for every solver (spec cbga §6.1, [T5.3.1] paired design): the environment
+generates the same scenario instance for every solver (the paired design of thesis §5.3.1): the environment
 draws the instance from ``reset(seed=s)`` before any policy acts, and each row carries a fingerprint of the instance
 so that the pairing can be checked. Policies that need protocol options (``env_overrides``, e.g. task quitting)
 get an environment built with them; those options do not touch the instance generator.
 
-Communication steps (spec cbga §6.2): ``messages`` counts every message received (one per sender → receiver
-pair per round); ``comm_steps`` = messages / N_n, the per-agent count whose magnitudes match the thesis's Fig 3.11.
+Communication steps (thesis §3.3.2: one message from i received by k is one step): ``messages`` counts every
+message received (one per sender → receiver pair per round); ``comm_steps`` = messages / N_n, the per-agent count
+(our reading) whose magnitudes match the thesis's Fig 3.11.
 Centralised solvers have no rounds or messages (left empty). Episodes that hit the round bound are kept and
 flagged ``converged = False``.
 """

@@ -1,12 +1,12 @@
-"""Experiment runner: the seed experiments of spec cbga §6 as YAML files, run on paired seeds, with reports.
+"""Experiment runner: the thesis's experiments (§3.3, §5.3) as YAML files, run on paired seeds, with reports.
 
     python -m evaluation.experiments run configs/experiments/fig5_16_l4.yaml [--episodes N] [--jobs N] [--quick]
     python -m evaluation.experiments run --all            # every configs/experiments/*.yaml, updates docs/results.md
     python -m evaluation.experiments report --all         # tables, plots and docs again from the saved CSVs
     python -m evaluation.experiments list
 
-Each experiment runs every series on the same seeds 0..N−1 at every sweep point (paired design, spec cbga §6.1,
-[T5.3.1]) and writes to ``<out>/<name>/``: ``episodes.csv`` (one row per episode, non-converged ones included and
+Each experiment runs every series on the same seeds 0..N−1 at every sweep point (the paired design of thesis
+§5.3.1) and writes to ``<out>/<name>/``: ``episodes.csv`` (one row per episode, non-converged ones included and
 flagged), ``table.md`` (mean ± sd per cell, paired figures against the baseline: Δ, ratio, paired t-test and
 Wilcoxon p-values, share of seeds won and tied; the published claims checked), one PNG per metric, a bar plot with
 per-seed differences at each headline point, ``config.yaml`` (the experiment and every resolved environment config)

@@ -1,7 +1,7 @@
 """Result rows → arrays, markdown tables, CSV files and PNG plots (shared by the compare command and the runner).
 
 A *row* is one episode (``evaluation.episodes.run_episode``). Rows of one cell (same point, same series) are
-sorted by seed, so cells of different series line up seed by seed for the paired statistics (spec cbga §6.2).
+sorted by seed, so cells of different series line up seed by seed for the paired statistics (``evaluation.stats``).
 """
 
 from __future__ import annotations

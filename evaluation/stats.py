@@ -1,8 +1,9 @@
-"""Paired statistics for policy comparisons on shared seeds (spec cbga §6.2, §8.24).
+"""Paired statistics for policy comparisons on shared seeds.
 
-The thesis quotes means ± (presumably) standard deviations and p-values without naming the test; the design is
-paired (the same seeds for every algorithm, [T5.3.1]), so we use a paired t-test and the Wilcoxon signed-rank
-test as a check, plus the share of seeds on which one variant beats another (Fig 5.16).
+The thesis quotes means ± (presumably) standard deviations and p-values without naming the test (§3.3.3, §5.3.2);
+the design is paired (the same seeds for every algorithm, thesis §5.3.1), so we use a paired t-test and the
+Wilcoxon signed-rank test as a check (our choice), plus the share of seeds on which one variant beats another
+(thesis §5.3.2, Fig 5.16).
 """
 
 from __future__ import annotations

@@ -3,14 +3,14 @@
 Both see the whole scenario at once (no messages, no rounds) and return an ``Allocation`` scored by the same code as
 ``env.evaluate()``, so every solver is compared on equal terms.
 
-``sgama``: the thesis's centralised sequential greedy algorithm for multi-agent assignments (Alg 7, spec cbga §6.7).
+``sgama``: the thesis's centralised sequential greedy algorithm for multi-agent assignments (thesis §3.3.3, Alg 7).
 Each iteration assigns the one (agent, task) pair with the largest c_ij + Σ_n x_nj (its marginal gain plus the
 bids already on the task), among pairs that are eligible (equipment, prerequisites per ``prereq_mode``, a feasible
 insertion with c_ij > 0) and where the group has room that the agent's equipment fills. The winner inserts the task
-at its best slot and records its bid, the step Alg 7 leaves out. With every L_j = 1 this is SGA (spec cbba §3).
+at its best slot and records its bid, the step Alg 7 leaves out. With every L_j = 1 this is SGA (Johnson §3.3.1).
 Ties go to the lowest agent id, then the lowest task id (Alg 7 scans agents, then tasks, with a strict ">").
 
-``exact``: the optimum of the team score (spec cbga §1.7) for small instances, at most ``MAX_AGENTS`` = 6 agents
+``exact``: the optimum of the team score (``scoring.team_score``) for small instances, at most ``MAX_AGENTS`` = 6 agents
 and ``MAX_TASKS`` = 9 tasks. The time grows with how many tasks one agent can chain: on a 2-core machine, 4 × 8
 with L_j = 2 and start times in [0, 50] took 1–16 s per instance, 6 × 9 over a minute. Every agent flies its own
 path (timing (3.8)–(3.10)), only valid tasks pay, travel always costs. Joining a task that ends up invalid only

@@ -1,15 +1,18 @@
 """Scripted baselines that read only the observation: CBBA, CBGA and its variants, random, always-pass.
 
-Bundle construction (spec cbga §3.3–3.6, Alg 5): among the valid bids (the action mask: eligibility filters and
-the outbid test h_ij), pick the largest marginal gain c_ij, one bid per step; pass when nothing is valid. Ties go to
-the lower task id (spec cbga §3.5 [INF]). The environment stores the bid, inserts the task at the agent's best slot
-and runs the consensus.
+Bundle construction (thesis §3.2.2, Alg 5): among the valid bids (the action mask: eligibility filters and the
+outbid test h_ij, Alg 5 l. 8–20), pick the largest marginal gain c_ij (J_i = argmax_j c_ij·h_ij, Alg 5 l. 21), one
+bid per step; pass when nothing is valid. Ties go to the lower task id (our choice; the thesis is silent, see
+docs/decisions.md). The environment stores the bid, inserts the task at the agent's best slot and runs the
+consensus.
 
-* ``team_bidding`` (spec cbga §5.2, Alg 8 / (5.5)): the final choice maximises the group total after the bid,
-  ``team_value = net`` (default: Σ_k X_i[k][j] − displaced bid + c_ij) or ``literal`` ((5.5) as printed, without
-  subtracting the displaced bid). Bid values and validity are unchanged.
-* ``task_quitting`` (spec cbga §5.3, Alg 9): before bidding, quit a multi-agent task whose group is still
-  incomplete once the group-synchronised timer passed δ = ``quit_threshold`` rounds, once per task. The
+* ``team_bidding`` (thesis §5.2.1, eq. (5.5); h_ij as in Alg 8): the final choice maximises the group total after
+  the bid, ``team_value = net`` (default: Σ_k X_i[k][j] − displaced bid + c_ij, our reading of the text's "taking
+  into account any replaced bids") or ``literal`` ((5.5) as printed, without subtracting the displaced bid). Bid
+  values and validity are unchanged.
+* ``task_quitting`` (thesis §5.2.2, Alg 9, eq. (5.6); article eq. (10)): before bidding, quit a multi-agent task
+  whose group is still incomplete once the group-synchronised timer passed δ = ``quit_threshold`` rounds, once per
+  task. The
   environment keeps the timer and allows the quit only when Alg 9's conditions hold, so the policy needs an
   environment with ``task_quitting=True, delta=quit_threshold`` (``env_overrides``). Quits go in task-id order,
   one per step, as Alg 9 loops over tasks.

@@ -1,7 +1,7 @@
 """Mixed teams: some agents played by scripted policies, the rest by the policy being trained or evaluated.
 
 ``scripted_agents`` maps agent names to policy names (``{"uav_0": "cbga"}``). One policy instance per name plays
-all agents mapped to it; scripted policies here read only their own agents' observations (spec cbga Alg 5), so a
+all agents mapped to it; scripted policies here read only their own agents' observations (thesis Alg 5), so a
 subset works.
 """
 

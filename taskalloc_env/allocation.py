@@ -1,6 +1,6 @@
 """The allocation type every solver returns: paths with start times, groups, validity, score and traffic.
 
-``Allocation.from_paths`` scores each agent's own path with the shared scoring code (spec cbga §1.7), so the
+``Allocation.from_paths`` scores each agent's own path with the shared scoring code (``scoring.team_score``), so the
 environment's ``evaluate()``, the centralised greedy SGAMA and the exact optimum are compared on equal terms.
 """
 
@@ -15,7 +15,7 @@ from taskalloc_env.scoring import Schedule, ScoringModel, team_score
 
 @dataclasses.dataclass
 class Counters:
-    """Cumulative figures of one run (thesis §3.5.1, §4.2: rounds, messages = communication steps, data items)."""
+    """Cumulative figures of one run (communication steps and bids as the thesis counts them, §3.3.2–3.3.3)."""
 
     rounds: int = 0
     messages: int = 0

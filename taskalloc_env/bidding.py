@@ -1,11 +1,14 @@
-"""Which bids each agent may place, read from its own local table (spec cbga §3.3–3.5).
+"""Which bids each agent may place, read from its own local table (thesis §3.2.2, Alg 5 l. 7–21).
 
 ``bid_view`` computes, for every agent i and task j at once:
 
-* the eligibility filters of §3.3: equipment (te_j = ∅ or ae_i ∩ te_j ≠ ∅), prerequisites per ``prereq_mode``
-  (§1.5), a feasible insertion (c_ij > 0), ``require_known_capacity``, ``quit_block``, j ∉ b_i, |b_i| < M_m;
-* the outbid test h_ij of §3.4: for L_j = 1, (c_ij, i) ≻ (y_j, z_j) (3.12); for L_j > 1, a free slot that i's
-  equipment fills, or (c_ij, i) ≻ the (bid, id)-lowest same-equipment member (3.13)–(3.15);
+* the eligibility filters: equipment (te_j = ∅ or ae_i ∩ te_j ≠ ∅, thesis §3.1.3), prerequisites per
+  ``prereq_mode`` ((3.6), article eq. (5); which reading is our choice), a feasible insertion (c_ij > 0, the window
+  rule (3.7)), ``require_known_capacity``, ``quit_block``, j ∉ b_i, |b_i| < M_m (Alg 5 l. 6); bids failing them
+  "will not be considered" (thesis §3.2.2);
+* the outbid test h_ij (Alg 5 l. 8–20): for L_j = 1, (c_ij, i) ≻ (y_j, z_j) ((3.12), ties to the higher id); for
+  L_j > 1, a free slot that i's equipment fills, or (c_ij, i) ≻ the (bid, id)-lowest same-equipment member
+  ((3.13)–(3.15));
 * what the bid would do to the group: the member it would displace, that member's bid, the group total
   Σ_k X_i[k][j] (4.2), so that the team value of (5.5) is group_total − displaced_bid + c_ij (``team_value=net``).
 """
@@ -29,7 +32,7 @@ class BidView:
     gain: np.ndarray            # c_ij (3.11)
     slot: np.ndarray            # n_ij, the best insertion slot
     outbid: np.ndarray          # h_ij
-    eligible: np.ndarray        # all §3.3 filters except the window (which ``gain`` > 0 encodes)
+    eligible: np.ndarray        # every eligibility filter except the window (which ``gain`` > 0 encodes)
     equipment_match: np.ndarray
     prereqs_met: np.ndarray
     members: np.ndarray         # member count n_j in i's table
@@ -46,13 +49,13 @@ class BidView:
 
     @property
     def team_value(self) -> np.ndarray:
-        """Σ_k X_i[k][j] − (displaced bid) + c_ij: the group total after the bid (spec cbga §5.2, ``net``)."""
+        """Σ_k X_i[k][j] − (displaced bid) + c_ij: the group total after the bid (thesis §5.2.1, (5.5); ``net``)."""
         return self.group_total - self.displaced_bid + self.gain
 
 
 def prerequisites_met(scenario: Scenario, mode: str, counts: np.ndarray,
                       complete: np.ndarray | None = None) -> np.ndarray:
-    """(H, M) prerequisite filter per ``prereq_mode`` (spec cbga §1.5) from H tables' member counts (H, M).
+    """(H, M) prerequisite filter per ``prereq_mode`` (thesis (3.6), article eq. (5)) from H tables' counts (H, M).
 
     ``complete`` (H, M), the groups that are full with their equipment covered, is needed for ``all_complete``.
     """
@@ -78,7 +81,11 @@ def complete_groups(bids: np.ndarray, scenario: Scenario, equipment: Equipment) 
 
 def known_capacity(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment,
                    equipment_match: np.ndarray) -> np.ndarray:
-    """(N, M) i knows at least L_j agents (itself included) that can jointly cover te_j (spec cbga §3.3 filter 4)."""
+    """(N, M) i knows at least L_j agents (itself included) that can jointly cover te_j.
+
+    Our choice, after thesis §4.3: an agent without communication partners has "no way to make any valid
+    assignments" to multi-agent tasks.
+    """
     known = knowledge.known.astype(np.int64)
     enough = known @ equipment_match.astype(np.int64) >= scenario.task_agents[None, :]
     covered = equipment.covers(np.broadcast_to(knowledge.known[:, :, None], (*known.shape, scenario.n_tasks)))
@@ -91,7 +98,7 @@ def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment
     """The bidding situation of every agent, computed from its local table only.
 
     ``fillable`` (M,) marks the tasks some team of the scenario can complete: every agent knows all agents'
-    equipment (spec cbga §2.1), so the capacity filter of §3.3 applies with everyone known; with
+    equipment (thesis §3.2.1), so the capacity filter applies with everyone known (our choice); with
     ``require_known_capacity`` the agents that i has discovered must suffice as well.
     """
     n, m = gain.shape

@@ -1,13 +1,14 @@
-"""The CBBA decision table for single-agent tasks (spec cbga §4.2; spec cbba_acbba §4.2, Table 3.1).
+"""The CBBA decision table for single-agent tasks (Choi et al. 2009; Johnson §3.4.1, Table 3.1; thesis Table 2.1).
 
 ``decide`` is pure: the receiver's and the sender's beliefs about each task's winner in, an action per task out
 (``LEAVE``, ``UPDATE``: copy the sender's winner and bid, ``RESET``: clear). It is vectorised over any leading
 shape, so one call decides a whole message, or one message for many receivers at once.
 
-Bids compare lexicographically on (bid, winner id): equal bids go to the higher id ([T3.2.3], Appendix A.1).
-``table="canonical"`` is Choi et al. 2009 (seed 003 Table 3.1); ``table="thesis"`` is the thesis transcription,
-which differs in two cells: (sender i, receiver m) leaves instead of resetting, and (sender m, receiver i) updates
-when the sender is fresher *or* bids higher instead of *and* (spec cbga §10).
+Bids compare lexicographically on (bid, winner id): equal bids go to the higher id (thesis §3.2.3 and App. A.1;
+the table itself has no tie rule). ``table="canonical"`` is Choi et al. 2009 as Johnson §3.4.1 Table 3.1 restates
+it; ``table="thesis"`` is the thesis's transcription (thesis §2.2.4, Table 2.1), which differs in two cells:
+(sender i, receiver m) leaves instead of resetting, and (sender m, receiver i) updates when the sender is fresher
+*or* bids higher instead of *and*.
 """
 
 from __future__ import annotations

@@ -2,15 +2,16 @@
 
 One flat, frozen :class:`TaskAllocConfig` holds three groups of fields:
 
-* scenario generation (spec cbga §6.1, §6.3): counts, arena, speeds, windows, agent types, task equipment mixes,
-  prerequisite chains, communication range;
-* scoring (spec cbga §1.7, §3.1–3.2): discount rates and the named options ``distance_cost``, ``prereq_timing``,
-  ``reward_split``, ``conflict_policy``, ``marginal_gain``;
-* protocol (spec cbga §3.3–§5.3, §4.2): ``cbba_table``, ``prereq_mode``, ``release_order``, ``task_quitting``,
-  ``delta``, ``reset_on``, ``quit_block``, ``require_known_capacity``, ``consensus``, ``max_bundle``,
-  ``max_rounds``.
+* scenario generation (thesis §3.3.2, §3.3.4, §5.3.1): counts, arena, speeds, windows, agent types, task
+  equipment mixes, prerequisite chains, communication range;
+* scoring (thesis §3.2.2, (3.8)–(3.11); §5.3.1): discount rates and the named options ``distance_cost``,
+  ``prereq_timing``, ``reward_split``, ``conflict_policy``, ``marginal_gain``;
+* protocol (thesis §3.2–§5.2; Johnson §3.4.1): ``cbba_table``, ``prereq_mode``, ``release_order``,
+  ``task_quitting``, ``delta``, ``reset_on``, ``quit_block``, ``require_known_capacity``, ``consensus``,
+  ``max_bundle``, ``max_rounds``.
 
-Every option named in the spec keeps its name and defaults to the spec's choice. Configs come from YAML files in
+The named options mark points the sources leave open or state in more than one way; docs/configuration.md gives
+the source of each and docs/decisions.md the reasons for the defaults. Configs come from YAML files in
 ``configs/scenarios/`` (``load_config``) and keyword overrides (``TaskAllocConfig.replace``); unknown keys and bad
 values raise :class:`ConfigError` naming the field and the allowed values.
 """
@@ -35,7 +36,7 @@ MAX_MAGNITUDE = 1e9
 MAX_FILE_BYTES = 1 << 20       # config files are a few hundred bytes; anything beyond 1 MiB is refused unread
 
 
-# Allowed values of every named option (spec cbga §11, plus ``marginal_gain`` and ``consensus``).
+# Allowed values of every named option (docs/configuration.md gives the source of each).
 CHOICES: dict[str, tuple[str, ...]] = {
     "units": ("km_min", "raw"),
     "edge_rule": ("dist", "circles_overlap"),
@@ -55,9 +56,9 @@ CHOICES: dict[str, tuple[str, ...]] = {
 
 @dataclasses.dataclass(frozen=True)
 class TaskMix:
-    """``count`` tasks needing ``agents`` agents and the equipment multiset ``equipment`` (spec cbga §1.4).
+    """``count`` tasks needing ``agents`` agents and the equipment multiset ``equipment`` (thesis §3.1.3).
 
-    With equipment, a task needs one agent per equipment item (|te_j| = L_j, [T3.1.3]); ``agents`` alone gives
+    With equipment, a task needs one agent per equipment item (|te_j| = L_j, thesis §3.1.3); ``agents`` alone gives
     tasks any agent may join.
     """
 
@@ -72,7 +73,7 @@ class TaskMix:
 
 @dataclasses.dataclass(frozen=True)
 class PrerequisiteChains:
-    """``chains`` prerequisite chains of ``length`` tasks each (E3.15: T → B → C, spec cbga §6.3).
+    """``chains`` prerequisite chains of ``length`` tasks each (E3.15: T → B → C, thesis §3.3.4, Figs 3.25–3.26).
 
     ``followup_window=False`` gives follow-up tasks no time requirement (E3.15 Exp3): their window stays open until
     the end of the horizon.
@@ -85,9 +86,9 @@ class PrerequisiteChains:
 
 @dataclasses.dataclass(frozen=True)
 class TaskAllocConfig:
-    """All settings of one task-allocation environment. Defaults reproduce spec cbga §6.1 with E5.10's L_j = 4."""
+    """All settings of one task-allocation environment. Defaults: thesis §3.3.2's test scenario, E5.10's L_j = 4."""
 
-    # -- scenario generation (spec cbga §6.1) --
+    # -- scenario generation (thesis §3.3.2) --
     n_agents: int = 10
     n_tasks: int = 20
     agents_per_task: int | tuple[int, ...] = 4
@@ -106,13 +107,13 @@ class TaskAllocConfig:
     prerequisites: PrerequisiteChains | None = None
     comm_range: float | None = None
     edge_rule: str = "dist"
-    # -- scoring (spec cbga §1.7, §3.1, §3.2, §10) --
+    # -- scoring (thesis §3.2.2, §5.3.1; docs/decisions.md) --
     distance_cost: str = "from_start"
     prereq_timing: str = "conservative"
     reward_split: str = "per_agent"
     conflict_policy: str = "first_L_paid"
     marginal_gain: str = "rescore"
-    # -- protocol (spec cbga §3.3–§5.3, §4.2, §4.4) --
+    # -- protocol (thesis §3.2, §4.2, §5.2; Johnson §3.4.1) --
     cbba_table: str = "canonical"
     prereq_mode: str = "all_have_bid"
     release_order: str = "bundle"
@@ -134,7 +135,7 @@ class TaskAllocConfig:
 
     @property
     def speed_internal(self) -> float:
-        """Speed in arena units per time unit: 20 m/s = 1.2 km/min under ``units=km_min`` (spec cbga §6.1)."""
+        """Speed in arena units per time unit: 20 m/s = 1.2 km/min under ``units=km_min`` (our unit reading)."""
         return self.speed * 0.06 if self.units == "km_min" else self.speed
 
     @property
@@ -230,7 +231,7 @@ def _validate(cfg: TaskAllocConfig) -> None:
                 _check_positive_int("task_mix.agents", mix.agents)
             if mix.equipment and mix.agents is not None and mix.agents != len(mix.equipment):
                 _fail("task_mix.agents", mix.agents,
-                      f"the number of equipment items {len(mix.equipment)} (|te_j| = L_j, spec cbga §1.1), "
+                      f"the number of equipment items {len(mix.equipment)} (|te_j| = L_j, thesis §3.1.3), "
                       "or leave agents out")
             known = set(cfg.agent_types or ())
             for item in mix.equipment:
@@ -409,5 +410,5 @@ def max_required_agents(cfg: TaskAllocConfig) -> int:
 
 
 def round_bound(n_tasks: int, n_agents: int, max_agents_per_task: int, diameter: int) -> int:
-    """T_max = 10 · max(N_m, N_n · max L_j) · D rounds (spec cbga §4.4, [INF])."""
+    """T_max = 10 · max(N_m, N_n · max L_j) · D rounds (our choice; the thesis gives no bound for CBGA)."""
     return 10 * max(n_tasks, n_agents * max_agents_per_task) * max(1, diameter)

@@ -1,16 +1,19 @@
-"""Phase 2: one synchronous round of message exchange and conflict resolution (spec cbga §4.1–4.3, §2.2, §2.4).
+"""Phase 2: one synchronous round of message exchange and conflict resolution (thesis §3.2.3, Alg 6; §4.2.2).
 
-Every agent sends its whole table to each neighbour (a snapshot taken before any processing, so bids propagate
-one hop per round and multi-hop over rounds). A receiver handles its inbox in ascending sender id; single-agent
-tasks go through the CBBA table (``cbba_table.decide``), multi-agent tasks through the two-pass merge
-(``group_merge.merge``). After each message s_i[k] = T; after the inbox, the timestamps of agents heard only
-through neighbours take the freshest neighbour value (2.4).
+Every agent sends its whole table to each neighbour (Alg 6 l. 1–2; whole tables are forwarded, so bids reach every
+connected agent, thesis §3.2.1). Each message is a snapshot taken before any processing, so bids propagate one hop
+per round and multi-hop over rounds; a receiver handles its inbox in ascending sender id (both our choices: the
+thesis does not fix an order). Single-agent tasks go through the CBBA table (``cbba_table.decide``, Alg 6
+l. 4–5), multi-agent tasks through the two-pass merge (``group_merge.merge``, Alg 6 l. 7–23). After each message
+s_i[k] = T (Alg 6 l. 24); after the inbox, the timestamps of agents heard only through neighbours take the
+freshest neighbour value (thesis eq. (2.4)).
 
 The receivers at the same inbox position are processed in one vectorised call, which gives exactly the
 sequential per-receiver semantics because receivers never read each other's tables within a round.
 
-Accounting (spec cbga §2.2, §6.2): one message = one (sender, receiver) pair = one communication step; a message
-holds 3·u + N_n data items (u = positive entries of the sender's table).
+Accounting: one message = one (sender, receiver) pair = one communication step (thesis §3.3.2); a message holds
+3·u + N_n data items (u = positive entries of the sender's table, one [task, agent, bid] triple each, plus the
+timestamp vector; thesis §4.2.2 and §4.3).
 """
 
 from __future__ import annotations
@@ -47,7 +50,7 @@ def exchange(knowledge: LocalKnowledge, graph: CommGraph, now: int, required_age
     sent_winning_bid = kn.winning_bid()
     sent_stamps = kn.timestamps.copy()
     # agents named in each message: the (agentID, time) pairs of the sender's timestamps cover every agent it knows,
-    # the bid triples name only agents it knows (spec cbga §2.2, Table 4.5)
+    # the bid triples name only agents it knows; unknown ids are added on receipt (thesis §4.2.2, Table 4.5)
     sent_agents = kn.known.copy()
     single_idx = np.flatnonzero(kn.single)
     multi_idx = np.flatnonzero(~kn.single)

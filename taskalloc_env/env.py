@@ -10,13 +10,13 @@ Action space           ``Discrete(1 + 2M)``: 0 pass, 1..M bid on task j−1, M+1
 Observation space      ``Dict(observation=Box(D,) float64, action_mask=Box(0, 1, (1 + 2M,), int8))``
 State space            ``Box`` of agent/task attributes, every agent's own bids and the round
 Reward                 cooperative, potential-based: every agent gets Δ team score (÷ ``reward_scale``)
-Termination            the allocation converged (no table changed for D + 1 rounds, spec cbga §4.4)
+Termination            the allocation converged (no table changed for D + 1 rounds; our stopping rule)
 Truncation             ``max_cycles`` steps, or the round bound T_max (``max_rounds``)
 =====================  ==============================================================================
 
-Each step is one decision per agent in the bundle phase of CBGA (spec cbga §3): *bid* on a task (inserted at the
-agent's best path slot, the bid being its marginal gain (3.11)), *quit* a multi-agent task (§5.3, only with
-``task_quitting``), or *pass*. The consensus protocol between agents is the environment's dynamics
+Each step is one decision per agent in the bundle phase of CBGA (thesis §3.2.2, Alg 5): *bid* on a task (inserted
+at the agent's best path slot, the bid being its marginal gain (3.11)), *quit* a multi-agent task (thesis §5.2.2,
+Alg 9, only with ``task_quitting``), or *pass*. The consensus protocol between agents is the environment's dynamics
 (``consensus="sync"``: once every agent has passed, the network exchanges messages and agents release what they
 were outbid on; ``"every_step"``: after every step). The action mask allows exactly the bids the protocol deems
 valid (eligibility and the outbid test h_ij) and the quits it allows; a passed agent may only pass until the

@@ -1,14 +1,17 @@
-"""The two-pass merge of multi-agent task columns (spec cbga §4.3; thesis Alg 6 with the guards needed to run it).
+"""The two-pass merge of multi-agent task columns (thesis §3.2.3, Alg 6 l. 7–23, with the guards needed to run it).
 
 ``merge`` is pure: the receivers' bid columns and the senders' bid columns in, the receivers' updated columns
 out. Arrays carry a leading receiver axis R (one message per receiver), an agent axis N and a task axis M, so a
 round's messages at one position of every receiver's inbox are merged in one call.
 
-Pass A refreshes what the receiver i already believes: for each member m ≠ i of column j, the sender's entry wins
-if m is the sender or the sender heard from m more recently (it may be 0: m left or was displaced).
-Pass B imports the sender's members that i does not hold, best (bid, id) first: a newcomer takes a free slot if
-the group has room and its equipment fills an unmet need; otherwise it displaces the (bid, id)-lowest member with
-the same equipment (3.15) if it outbids it. The displaced member may be i itself: that is how i learns it lost.
+Pass A (Alg 6 l. 7–12) refreshes what the receiver i already believes: for each member m ≠ i of column j, the
+sender's entry wins if m is the sender or the sender heard from m more recently (it may be 0: m left or was
+displaced). Pass B (Alg 6 l. 13–23) imports the sender's members that i does not hold, best (bid, id) first: a
+newcomer takes a free slot if the group has room and its equipment fills an unmet need; otherwise it displaces the
+(bid, id)-lowest member with the same equipment ((3.15)) if it outbids it (ties: the higher id, thesis §3.2.3).
+The displaced member may be i itself: that is how i learns it lost. Guards added to the listing (our choices, see
+docs/algorithm.md): i is authoritative on its own row, Pass B also trusts the sender's own entry, and it takes the
+sender's members in a fixed order.
 """
 
 from __future__ import annotations

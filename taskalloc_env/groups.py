@@ -5,14 +5,18 @@ asks whether a group is complete, whether an agent may join it, or whom it displ
 (``bidding.bid_view``), the consensus merge (``group_merge.merge``) and the centralised greedy (``policies``'
 SGAMA) all call it, so the mask and the consensus cannot drift apart.
 
-Equipment (spec cbga §1.4): agent i carries the set ae_i, task j requires the multiset te_j (counts per item);
-te_j = ∅ lets any agent join. A group *covers* te_j when its members' items include te_j as a multiset (3.5).
+Equipment (thesis §3.1.3, eq. (3.5)): agent i carries the set ae_i, task j requires te_j, held here as a multiset
+(counts per item, our choice: the thesis's experiments ask for "two agents of type A", §3.3.2); te_j = ∅ lets any
+agent join. A group *covers* te_j when its members' items include te_j as a multiset ((3.5), read with x_ij = 1).
 
-Admission of a newcomer k with bid b to a column (spec cbga §3.4, Alg 5 lines 8–20, (3.12)–(3.15)):
+Admission of a newcomer k with bid b to a column (thesis Alg 5 l. 8–20 and eqs. (3.12)–(3.14) in §3.2.2; the
+equipment rule and (3.15) in §3.2.3; article eq. (9)):
 
-* *room*: fewer than L_j members, and k's equipment fills an item of te_j the members leave unmet (or te_j = ∅);
+* *room*: fewer than L_j members ((3.13), Alg 5 l. 10), and k's equipment fills an item of te_j the members leave
+  unmet, or te_j = ∅ (thesis §3.2.3: "the new assignment must contribute to the correct equipment list");
 * otherwise k may displace the (bid, id)-lowest member that carries an item of te_j that k carries too (any member
-  when te_j = ∅), if (b, k) outbids that member's (bid, id) (``cbba_table.outbids``).
+  when te_j = ∅; (3.15): ae_n = ae_m), if (b, k) outbids that member's (bid, id) (``cbba_table.outbids``: the
+  higher id wins a tie, thesis §3.2.3).
 """
 
 from __future__ import annotations

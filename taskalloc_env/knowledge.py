@@ -1,9 +1,10 @@
-"""Every agent's local knowledge (spec cbga §2.2–2.4): winning bids, timestamps, bundle, path, quit timers.
+"""Every agent's local knowledge: winning bids, timestamps, bundle, path, quit timers (thesis §3.2.1, §4.2, §5.2.2).
 
-Storage follows chapter 4: one bid matrix per agent, X_i[k][j] > 0 ⇔ agent k holds bid X_i[k][j] on task j (the
-binary matrix of chapter 3 is implied). All agents' matrices live in one array ``bids[i, k, j]`` indexed by agent
-and task id, so a message is keyed by ids and only positive entries carry information. ``known[i, k]`` records
-which agents i has discovered (its own id always; others on first contact or when a relayed triple names them).
+Storage follows thesis chapter 4 (§4.2.1, eqs. (4.2)–(4.3), Table 4.3): one bid matrix per agent, X_i[k][j] > 0
+⇔ agent k holds bid X_i[k][j] on task j (the binary matrix of chapter 3 is implied). All agents' matrices live in
+one array ``bids[i, k, j]`` indexed by agent and task id (our storage choice), so a message is keyed by ids and only
+positive entries carry information (thesis §4.2.2). ``known[i, k]`` records which agents i has discovered (its own
+id always; others on first contact or when a relayed triple names them, thesis Table 4.5).
 
 For single-agent tasks ``winner[i, j]`` caches the one positive entry of column j (or NONE), which is what the CBBA
 table reads; every write goes through this class so the cache and ``bids`` never disagree.
@@ -30,8 +31,8 @@ class LocalKnowledge:
     known: np.ndarray           # (N, N) agents i has discovered
     bundles: list[list[int]]    # b_i, insertion order
     paths: list[list[int]]      # p_i, execution order
-    assigned_at: np.ndarray     # (N, M) H_i[j] (spec cbga §2.3, (5.6))
-    quit: np.ndarray            # (N, M) Q_i[j]
+    assigned_at: np.ndarray     # (N, M) H_i[j] (thesis §5.2.2, (5.6))
+    quit: np.ndarray            # (N, M) Q_i[j] (thesis §5.2.2, Alg 9)
     quit_members: np.ndarray    # (N, M) member count of column j right after i quit it (quit_block), or NEVER
     single: np.ndarray          # (M,) L_j == 1
 
@@ -94,7 +95,7 @@ class LocalKnowledge:
         self.assigned_at[i, j] = now
 
     def release(self, i: int, lost: int, order: str) -> list[int]:
-        """Drop ``lost`` and every task after it from b_i and p_i, zeroing i's own bids on them (spec cbga §3.8).
+        """Drop ``lost`` and every task after it from b_i and p_i, zeroing i's own bids on them (thesis §2.2.4).
 
         ``order="bundle"`` releases what was added after ``lost``; ``order="path"`` what is scheduled after it.
         Returns the released tasks other than ``lost``.

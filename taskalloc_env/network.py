@@ -1,8 +1,10 @@
-"""The communication graph (spec cbga §4.1, §6.4): fully connected, or range-limited between start positions.
+"""The communication graph g_ik (thesis §2.2.4, §3.2.1): fully connected, or range-limited between start positions.
 
-``edge_rule="dist"`` links agents at distance ≤ r; ``"circles_overlap"`` links them when their range circles
-overlap (distance ≤ 2r). ``comm_range=None`` is global broadcast. Messages are forwarded whole, so bids travel
-multi-hop; D (the diameter, the largest over connected components) bounds how many rounds that takes.
+The thesis draws a range circle per agent (thesis §4.3, Figs 4.2–4.5) but never writes the edge rule, so it is our
+choice: ``edge_rule="dist"`` links agents at distance ≤ r; ``"circles_overlap"`` links them when their range
+circles overlap (distance ≤ 2r). ``comm_range=None`` is global broadcast. Messages are forwarded whole, so bids
+travel multi-hop; D (the diameter, the largest over connected components) bounds how many rounds that takes (a bid
+needs up to D rounds to cross the network, thesis §4.3).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 An agent's observation vector is ``[own features | task 0 features | … | task M−1 features]``. Bid-like values
 are divided by the largest task reward c̄, so the gain, the group total and the displaced bid add up to the team
-value of spec cbga §5.2 in the same unit. ``ObservationLayout`` names every column so policies (scripted or
+value of thesis (5.5) in the same unit. ``ObservationLayout`` names every column so policies (scripted or
 learned) can slice the vector without magic numbers.
 """
 

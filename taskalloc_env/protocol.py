@@ -1,14 +1,17 @@
-"""CBGA's two phases over all agents' local knowledge, driven one decision at a time (spec cbga §3–§5).
+"""CBGA's two phases over all agents' local knowledge, driven one decision at a time (thesis ch. 3–5).
 
-The environment calls ``bid`` and ``quit`` for the agents' decisions in the bundle phase, and ``end_round`` when
-the round is over. ``end_round`` is Phase 2 and the clean-up of spec cbga §4.4:
+The environment calls ``bid`` and ``quit`` for the agents' decisions in the bundle phase (thesis Alg 5; Alg 9),
+and ``end_round`` when the round is over. ``end_round`` is Phase 2 and the clean-up that precedes the next bundle
+phase (thesis §3.2.3 and §5.2.2):
 
-    T += 1; exchange (consensus.exchange); outbid release (§3.8); quit timers (Alg 9 lines 4–5);
-    convergence: no table or bundle changed for D + 1 consecutive rounds (and no quit timer still running).
+    T += 1; exchange (consensus.exchange, Alg 6); outbid release (thesis §2.2.4, Johnson eqs. (3.11)–(3.12));
+    quit timers (Alg 9 l. 4–5); convergence: no table or bundle changed for D + 1 consecutive rounds (and no quit
+    timer still running) -- our stopping rule: the thesis gives none for detecting convergence (docs/decisions.md).
 
-Task quitting is part of the protocol when ``task_quitting`` is on: agent i may quit j only if L_j > 1, i is a
-member, it never quit j (Q_i[j] = 0), the group is incomplete in its view and the group-synchronised timer has
-run out (T − H_i[j] > δ, ``delta``). Which bids and quits to make is the policy's choice.
+Task quitting is part of the protocol when ``task_quitting`` is on (thesis §5.2.2, Alg 9): agent i may quit j
+only if L_j > 1, i is a member, it never quit j (Q_i[j] = 0), the group is incomplete in its view and the
+group-synchronised timer has run out (T − H_i[j] > δ, ``delta``). Which bids and quits to make is the policy's
+choice.
 """
 
 from __future__ import annotations
@@ -139,7 +142,7 @@ class Protocol:
         return self._view
 
     def score(self) -> TeamScore:
-        """The team score of the allocation as it stands: each agent's own path (spec cbga §1.7)."""
+        """The team score of the allocation as it stands: each agent's own path (``scoring.team_score``)."""
         if self._score is None:
             self._refresh_paths()
             self._score = team_score(self.model, self._paths, self.cfg.conflict_policy)
@@ -147,15 +150,15 @@ class Protocol:
 
     # -- Phase 1 decisions ---------------------------------------------------------------------------------------
     def _quittable(self) -> np.ndarray:
-        """(N, M) the timer-free quit conditions (spec cbga §5.3 conditions 1–4): L_j > 1, i holds j, i never quit
-        j, and the group is incomplete in i's table. Quitting, the pending-quit test and the timer reset share it."""
+        """(N, M) the timer-free quit conditions (thesis Alg 9 l. 2–3): L_j > 1, i holds j, i never quit j, and
+        the group is incomplete in i's table. Quitting, the pending-quit test and the timer reset share it."""
         kn = self.knowledge
         return ((self.scenario.task_agents > 1)[None, :] & (kn.own_bids() > 0) & ~kn.quit
                 & (kn.member_counts() < self.scenario.task_agents[None, :]))
 
     def quit_options(self) -> np.ndarray:
-        """(N, M) quits the protocol allows now: quittable and the timer ran out, T − H_i[j] > δ (spec cbga §5.3
-        condition 6; cached until the next change)."""
+        """(N, M) quits the protocol allows now: quittable and the timer ran out, T − H_i[j] > δ (thesis Alg 9 l. 6,
+        H_ij < T − δ; article eq. (10)); cached until the next change."""
         if self._quits is None:
             if not self.cfg.task_quitting:
                 self._quits = np.zeros(self.knowledge.quit.shape, dtype=bool)
@@ -174,7 +177,7 @@ class Protocol:
             raise ProtocolError(f"agent {agent} has no valid bid on task {task} ({self.explain_bid(agent, task)})")
         kn = self.knowledge
         displaced = int(view.displaced[agent, task])
-        if displaced != NONE:           # keep n_j ≤ L_j locally; Phase 2 propagates the eviction (spec cbga §3.6)
+        if displaced != NONE:           # keep n_j ≤ L_j locally (our choice); Phase 2 propagates the eviction
             kn.set_bid(agent, displaced, task, 0.0)
         value = float(view.gain[agent, task])
         kn.add_to_bundle(agent, task, int(view.slot[agent, task]), value, self.round)
@@ -183,7 +186,7 @@ class Protocol:
         return value
 
     def explain_bid(self, agent: int, task: int) -> str:
-        """Why a bid is not valid, in the words of spec cbga §3.3–3.4."""
+        """Why a bid is not valid: the eligibility filters and the outbid test of ``bidding.bid_view``."""
         v = self.view()
         reasons = []
         if v.in_bundle[agent, task]:
@@ -219,7 +222,7 @@ class Protocol:
 
     # -- Phase 2 and clean-up ------------------------------------------------------------------------------------
     def end_round(self) -> Traffic:
-        """Exchange, outbid release, quit timers and the convergence test (spec cbga §4.4)."""
+        """Exchange, outbid release, quit timers and the convergence test (see the module docstring)."""
         kn = self.knowledge
         self.round += 1
         before = kn.bids.copy()
@@ -245,7 +248,7 @@ class Protocol:
         return traffic
 
     def _release_outbid(self) -> None:
-        """Release the first lost bundle task and everything after it (spec cbga §3.8)."""
+        """Release the first lost bundle task and everything after it (thesis §2.2.4; Johnson (3.11)–(3.12))."""
         kn = self.knowledge
         own = kn.own_bids()
         for i, bundle in enumerate(kn.bundles):
@@ -272,7 +275,7 @@ class Protocol:
 
     # -- agreement -------------------------------------------------------------------------------------------------
     def agreement(self) -> bool:
-        """Every pair of agents in one connected component holds the same table (spec cbga §8.3)."""
+        """Every pair of agents in one connected component holds the same table (the consensus of thesis §3.2.3)."""
         bids = self.knowledge.bids
         comp = self.graph.component
         return all(np.array_equal(bids[i], bids[comp[i]]) for i in range(len(comp)))

@@ -1,12 +1,12 @@
-"""Agents and tasks of one problem instance, as arrays (spec cbga §1.1).
+"""Agents and tasks of one problem instance, as arrays (thesis §3.1.1–3.1.3).
 
 A :class:`Scenario` is either generated from a :class:`~taskalloc_env.config.TaskAllocConfig` and a
-``numpy.random.Generator`` (``generate``; every seed a new instance, spec cbga §6.1), or built from explicit
+``numpy.random.Generator`` (``generate``; every seed a new instance, thesis §3.3.2), or built from explicit
 :class:`Agent` and :class:`Task` records (``Scenario.from_entities``). Agent and task ids are their indices.
 
 Equipment: every agent carries a set of equipment items (``ae_i``, a bit mask over the scenario's equipment
-names) and every task requires a multiset (``te_j``, a count per item); the empty multiset lets any agent bid
-(spec cbga §1.4).
+names) and every task requires a multiset (``te_j``, a count per item; the multiset is our reading of te_j); the
+empty multiset lets any agent bid (thesis §3.1.3).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ NO_DEADLINE = np.inf
 
 @dataclasses.dataclass(frozen=True)
 class Agent:
-    """One UAV: start position (3-D), constant speed, equipment set (spec cbga §1.1)."""
+    """One UAV: start position (3-D), constant speed, equipment set ae_i (thesis §3.1.3, §3.3.2)."""
 
     position: tuple[float, float, float]
     speed: float
@@ -36,7 +36,7 @@ class Agent:
 
 @dataclasses.dataclass(frozen=True)
 class Task:
-    """One task: position, reward c̄_j, start window [start, end], duration, L_j, te_j, P_j (spec cbga §1.1)."""
+    """One task: position, reward c̄_j, start window [start, end], duration, L_j, te_j, P_j (thesis §3.1.2–3.1.3)."""
 
     position: tuple[float, float, float]
     reward: float
@@ -117,15 +117,15 @@ class Scenario:
         if np.any((items > 0) & (items != self.task_agents)):
             bad = np.flatnonzero((items > 0) & (items != self.task_agents)).tolist()
             raise ValueError(f"tasks {bad} require a number of equipment items other than L_j: a task's equipment "
-                             "names one item per agent, |te_j| = L_j, or none at all (spec cbga §1.1, [T3.1.3]; "
-                             "decoupling L_j from te_j is future work, §7.2)")
+                             "names one item per agent, |te_j| = L_j, or none at all (thesis §3.1.3; "
+                             "decoupling L_j from te_j is future work, thesis §6.1.2 and §6.2)")
         if np.any(self.agent_equipment.sum(axis=1) > 1):
             bad = np.flatnonzero(self.agent_equipment.sum(axis=1) > 1).tolist()
             raise ValueError(f"agents {bad} carry several equipment items; every agent carries one type or none "
-                             "(spec cbga §1.4: |ae_i| = 1 in every experiment; with several items the group rules "
-                             "of §3.4/§4.3 depend on the order members join)")
+                             "(|ae_i| = 1 in every experiment of the thesis; with several items the group rules "
+                             "of docs/algorithm.md depend on the order members join)")
         if np.any(np.diag(self.task_prereqs)):
-            raise ValueError("a task cannot be its own prerequisite (j ∉ P_j, spec cbga §1.1)")
+            raise ValueError("a task cannot be its own prerequisite (j ∉ P_j, thesis §3.1.3)")
         if _has_cycle(self.task_prereqs):
             raise ValueError("prerequisites contain a cycle; no task of the cycle could ever be done")
         for array in dataclasses.astuple(self):
@@ -154,7 +154,7 @@ class Scenario:
         return bool(self.task_prereqs.any())
 
     def eligible(self) -> np.ndarray:
-        """(N, M) equipment eligibility: te_j = ∅ or ae_i ∩ te_j ≠ ∅ (spec cbga §1.4, §3.3 filter 1)."""
+        """(N, M) equipment eligibility: te_j = ∅ or ae_i ∩ te_j ≠ ∅ (thesis §3.1.3)."""
         required = self.task_equipment > 0
         shares = self.agent_equipment.astype(np.int64) @ required.T.astype(np.int64) > 0
         return shares | ~required.any(axis=1)[None, :]
@@ -304,10 +304,11 @@ def _has_cycle(prereqs: np.ndarray) -> bool:
 
 
 def generate(cfg: TaskAllocConfig, rng: np.random.Generator) -> Scenario:
-    """Draw a random instance of ``cfg`` (spec cbga §6.1).
+    """Draw a random instance of ``cfg`` (the test scenario of thesis §3.3.2).
 
     Agents start uniformly on the floor (z = 0), tasks uniformly in the W × W × H volume, start times
-    U(start_time_range) (``start_time_dist`` [REF]), end = start + window, duration fixed. L_j is ``agents_per_task``
+    U(start_time_range) (the distribution is our choice; the thesis does not state it), end = start + window,
+    duration fixed. L_j is ``agents_per_task``
     (one value, or drawn uniformly from a list), or comes from ``task_mix``. Prerequisite chains follow E3.15.
     """
     n, m = cfg.n_agents, cfg.n_tasks

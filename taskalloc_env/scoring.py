@@ -1,4 +1,4 @@
-"""Path timing, path score and marginal gains (spec cbga §3.1–3.2), shared by the env, the policies and the solvers.
+"""Path timing, path score and marginal gains (thesis §3.2.2, eqs. (3.7)–(3.11)), shared by env, policies, solvers.
 
 For a path p of agent i (loc_0 = start position, t_0 = 0), task by task (3.8–3.10):
 
@@ -8,13 +8,17 @@ For a path p of agent i (loc_0 = start position, t_0 = 0), task by task (3.8–3
     reward_r = c̄_j · exp(−λ (st_r − start_j))              (3.8), discount from the task's own start
     cost_r   = γ · d_r                                       (3.9), d_r per ``distance_cost``
 
-e_j = max(start_j, ready_j) where ready_j is the prerequisite rule of ``prereq_timing`` (spec cbga §1.5):
-``conservative`` ready_j = max_m (end_m + dur_m), ``earliest`` max_m (start_m + dur_m), ``none`` −∞. A task whose
-e_j is not before end_j can never be started.
+(3.8) is printed with the arrival time; discounting from the start st_r (so early arrival never earns more than
+c̄_j) is Johnson's Δτ = max(0, τ − τ_start) of §3.4.1. The two ``distance_cost`` readings of d_r are our choice
+(see docs/decisions.md). e_j = max(start_j, ready_j) where ready_j is the prerequisite rule of ``prereq_timing``
+(our choice: thesis §3.1.3 says prerequisites "must be completed before" j but gives no timing formula):
+``conservative`` ready_j = max_m (end_m + dur_m), ``earliest`` max_m (start_m + dur_m), ``none`` −∞. A task
+whose e_j is not before end_j can never be started.
 
 Marginal gain (3.11): c_ij = max_n S(p ⊕_n j) − S(p) over feasible insertions, 0 if none. ``marginal_gain``:
 ``rescore`` (default, the thesis's (3.11): later tasks are re-timed, their rewards and feasibility re-checked) or
-``frozen`` (Johnson §1.5: existing start times may not move, which keeps the score DMG).
+``frozen`` (Johnson §3.3.1 eq. (3.2) and §3.4.1 eq. (3.6): existing service times may not move, which keeps the
+score DMG, Johnson (3.13)–(3.19)).
 """
 
 from __future__ import annotations
@@ -31,7 +35,7 @@ from taskalloc_env.scenario import Scenario
 
 @dataclasses.dataclass(frozen=True)
 class Schedule:
-    """Timing of one path: arrays aligned with the path (spec cbga §3.1)."""
+    """Timing of one path: arrays aligned with the path ((3.7)–(3.10))."""
 
     path: tuple[int, ...]
     arrival: np.ndarray
@@ -72,7 +76,7 @@ class ScoringModel:
             array.setflags(write=False)
 
     def _prerequisite_ready(self, prereq_timing: str) -> np.ndarray:
-        """ready_j: the earliest time a follow-up may start under ``prereq_timing`` (spec cbga §1.5)."""
+        """ready_j: the earliest time a follow-up may start under ``prereq_timing`` (our choice, see above)."""
         s = self.scenario
         if prereq_timing == "none" or not s.has_prerequisites:
             return np.full(s.n_tasks, -np.inf)
@@ -238,7 +242,7 @@ class Plan:
 
 
 def prerequisites_valid(scenario: Scenario, valid: np.ndarray) -> np.ndarray:
-    """Drop tasks whose prerequisites are not all valid, transitively (spec cbga §1.7 [INF])."""
+    """Drop tasks whose prerequisites are not all valid, transitively (our choice; the thesis is silent)."""
     valid = valid.copy()
     if not scenario.has_prerequisites:
         return valid
@@ -251,7 +255,7 @@ def prerequisites_valid(scenario: Scenario, valid: np.ndarray) -> np.ndarray:
 
 @dataclasses.dataclass(frozen=True)
 class TeamScore:
-    """The score of an allocation given as each agent's own path (spec cbga §1.7)."""
+    """The score of an allocation given as each agent's own path (see ``team_score``)."""
 
     score: float
     agent_scores: np.ndarray    # (N,)
@@ -308,11 +312,14 @@ class PathTable:
 
 def team_score(model: ScoringModel, paths: Sequence[Schedule] | PathTable,
                conflict_policy: str = "first_L_paid") -> TeamScore:
-    """Score = Σ_i Σ_{j∈p_i} (z_j · reward_ij − cost_ij): only valid tasks pay, travel always costs (spec cbga §1.7).
+    """Score = Σ_i Σ_{j∈p_i} (z_j · reward_ij − cost_ij): only valid tasks pay, travel always costs.
 
-    A task is valid when exactly L_j members hold it, their equipment covers te_j and its prerequisites are valid.
-    A task with more than L_j members is a conflict: under ``first_L_paid`` its first L_j starters (ties: higher
-    agent id first) are paid if they form a valid group; under ``none_paid`` nobody is.
+    Thesis (3.4) with z_j, §3.1.2 (a failed task provides no score) and §5.3.1 ("the sum of all rewards for
+    completed tasks minus the cost of agents travelling"). A task is valid when exactly L_j members hold it ((3.3)),
+    their equipment covers te_j ((3.5)) and its prerequisites are valid (our choice). A task with more than L_j
+    members is a conflict (after convergence only in a disconnected network, thesis §4.3): under ``first_L_paid``
+    its first L_j starters (ties: higher agent id first) are paid if they form a valid group; under ``none_paid``
+    nobody is (both our choice).
     """
     s = model.scenario
     table = paths if isinstance(paths, PathTable) else PathTable.of(paths, s.n_tasks)

@@ -1,7 +1,8 @@
-"""Shared test helpers: reference computations written from the spec, scenario builders, an episode driver.
+"""Shared test helpers: reference computations written from the sources, scenario builders, an episode driver.
 
-The reference functions here are deliberately simple loops over the formulas of spec cbga §3.1–3.2 and §1.7, so
-that the vectorised implementation is checked against an independent reading of the spec rather than itself.
+The reference functions here are deliberately simple loops over the formulas of thesis §3.2.2 ((3.7)–(3.11)) and
+the team score of thesis §5.3.1 (docs/algorithm.md), so that the vectorised implementation is checked against an
+independent reading of the sources rather than itself.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ TOL = 1e-9
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Reference path timing and score (spec cbga §3.1, (3.7)–(3.10), §1.5 prereq_timing)
+# Reference path timing and score (thesis (3.7)–(3.10); prereq_timing, our choice)
 # ---------------------------------------------------------------------------------------------------------------
 @dataclass
 class Replay:
@@ -37,7 +38,7 @@ class Replay:
 
 
 def ready_time(s: Scenario, j: int, prereq_timing: str) -> float:
-    """Earliest start allowed by the prerequisites of j (spec cbga §1.5)."""
+    """Earliest start allowed by the prerequisites of j (``prereq_timing``, our choice; see docs/decisions.md)."""
     prereqs = np.flatnonzero(s.task_prereqs[j])
     if prereq_timing == "none" or prereqs.size == 0:
         return -math.inf
@@ -48,7 +49,7 @@ def ready_time(s: Scenario, j: int, prereq_timing: str) -> float:
 
 def replay(s: Scenario, agent: int, path: Sequence[int], *, distance_cost: str = "from_start",
            prereq_timing: str = "conservative", reward_split: str = "per_agent") -> Replay:
-    """Walk the path as spec cbga §3.1 writes it, one task at a time."""
+    """Walk the path with thesis (3.7)–(3.10), one task at a time (reward discounted from the start time)."""
     loc = s.agent_pos[agent]
     t = 0.0
     speed = float(s.agent_speed[agent])
@@ -92,7 +93,7 @@ def reference_gain(s: Scenario, agent: int, path: Sequence[int], j: int, *, marg
 
 def reference_team_score(s: Scenario, paths: Sequence[Sequence[int]], *, conflict_policy: str = "first_L_paid",
                          **scoring) -> tuple[float, set[int]]:
-    """Spec cbga §1.7: rewards of valid tasks minus all travel; returns (score, valid tasks)."""
+    """Thesis §5.3.1: rewards of valid tasks minus all travel; returns (score, valid tasks)."""
     replays = [replay(s, i, p, **scoring) for i, p in enumerate(paths)]
     members: dict[int, list[int]] = {j: [] for j in range(s.n_tasks)}
     start_of: dict[tuple[int, int], float] = {}
@@ -197,7 +198,7 @@ def run_episode(env: TaskAllocEnv, policy, seed: int | None, *, check: Callable[
 
 
 def check_tables(env: TaskAllocEnv) -> None:
-    """Invariants that hold in every agent's local table after every step (spec cbga §8.1, 8.2, 8.4–8.8)."""
+    """Invariants that hold in every agent's local table after every step (docs/algorithm.md)."""
     p = env.protocol
     s = p.scenario
     kn = p.knowledge
@@ -206,40 +207,40 @@ def check_tables(env: TaskAllocEnv) -> None:
     present = bids > 0
     counts = present.sum(axis=1)
     over = np.argwhere(counts > s.task_agents[None, :])
-    assert over.size == 0, f"capacity (§8.1): agent/task {over.tolist()} has more than L_j members in its table"
-    # the single-agent winner cache agrees with the matrix (§8.2)
+    assert over.size == 0, f"capacity (thesis (3.4)): agent/task {over.tolist()} has more than L_j members in its table"
+    # the single-agent winner cache agrees with the matrix (one winner per single-agent task)
     for i in range(n):
         for j in np.flatnonzero(s.task_agents == 1):
             holders = np.flatnonzero(present[i, :, j])
             expected = int(holders[0]) if holders.size else NONE
             assert kn.winner[i, j] == expected, f"winner cache of agent {i} task {j}"
-    # equipment eligibility of every member in every table (§8.7) and no surplus type (§8.8)
+    # equipment eligibility of every member in every table (thesis §3.1.3) and no surplus type ((3.5), §3.2.3)
     eligible = s.eligible()
     bad = np.argwhere(present & ~eligible[None, :, :])
-    assert bad.size == 0, f"equipment (§8.7): (holder, member, task) {bad.tolist()} is not eligible"
-    if s.has_equipment and s.agent_equipment.sum(axis=1).max() <= 1:       # single-type agents (§8.8)
+    assert bad.size == 0, f"equipment (thesis §3.1.3): (holder, member, task) {bad.tolist()} is not eligible"
+    if s.has_equipment and s.agent_equipment.sum(axis=1).max() <= 1:       # single-type agents
         have = np.einsum("ikj,ke->ije", present.astype(int), s.agent_equipment.astype(int))
         restricted = s.task_equipment.any(axis=1)
         surplus = (have > s.task_equipment[None, :, :]) & restricted[None, :, None]
-        assert not surplus.any(), f"equipment (§8.8): surplus type in {np.argwhere(surplus).tolist()}"
-    # positive bids never exceed c̄_j (§8.5)
+        assert not surplus.any(), f"equipment (thesis (3.5)): surplus type in {np.argwhere(surplus).tolist()}"
+    # positive bids never exceed c̄_j (reward ≤ c̄_j and cost ≥ 0, (3.8)–(3.9))
     assert np.all(bids[present] <= np.broadcast_to(s.task_reward, bids.shape)[present] + TOL), "bid above c̄_j"
     cap = env.config.max_bundle or m
     scoring = scoring_options(env)
     for i in range(n):
         b, path = kn.bundles[i], kn.paths[i]
         assert len(set(b)) == len(b), f"duplicate in bundle {b}"
-        assert sorted(b) == sorted(path), f"path {path} is not a permutation of bundle {b} (§8.5)"
+        assert sorted(b) == sorted(path), f"path {path} is not a permutation of bundle {b} (thesis Table 3.1)"
         assert len(b) <= cap
         assert set(b) == set(np.flatnonzero(bids[i, i] > 0).tolist()), \
-            f"self-consistency (§8.4): agent {i} bundle {b} vs own row {np.flatnonzero(bids[i, i] > 0).tolist()}"
+            f"self-consistency: agent {i} bundle {b} vs own row {np.flatnonzero(bids[i, i] > 0).tolist()}"
         r = replay(s, i, path, **scoring)
-        assert r.feasible, f"agent {i} path {path} misses a window (§8.6)"
+        assert r.feasible, f"agent {i} path {path} misses a window ((3.7))"
         check_path_timing(s, i, path, r)
 
 
 def check_path_timing(s: Scenario, i: int, path: Sequence[int], r: Replay) -> None:
-    """Spec cbga §8.6: arr < end, st ≥ start, st_{r+1} ≥ st_r + dur_r + leg_{r+1}/v."""
+    """Path feasibility ((3.7)): arr < end, st ≥ start, st_{r+1} ≥ st_r + dur_r + leg_{r+1}/v."""
     for q, j in enumerate(path):
         assert r.arrival[q] < s.task_end[j]
         assert s.task_start[j] <= r.start[q] <= s.task_end[j]
@@ -255,7 +256,7 @@ def scoring_options(env: TaskAllocEnv) -> dict:
 
 
 def check_converged_allocation(env: TaskAllocEnv, episode: Episode, *, full_comms: bool = True) -> None:
-    """Spec cbga §8.3, 8.4, 8.7, 8.8, 8.13, 8.14, 8.22, 8.23 on a finished episode."""
+    """Agreement, self-consistency, equipment, prerequisites, windows and the team score of a finished episode."""
     p = env.protocol
     s = p.scenario
     alloc = episode.allocation
@@ -264,11 +265,11 @@ def check_converged_allocation(env: TaskAllocEnv, episode: Episode, *, full_comm
     assert p.round <= p.max_rounds
     if full_comms:
         for i in range(1, s.n_agents):
-            assert np.array_equal(kn.bids[i], kn.bids[0]), f"agreement (§8.3): agent {i} differs from agent 0"
+            assert np.array_equal(kn.bids[i], kn.bids[0]), f"agreement (thesis §3.2.3): agent {i} differs from agent 0"
         own = kn.own_bids()
         for k in range(s.n_agents):
-            np.testing.assert_array_equal(kn.bids[k], own, err_msg="self-consistency (§8.4): X_k[i] != X_i[i]")
-        assert not alloc.conflicts, f"conflicts under global communication (§8.23): {alloc.conflicts}"
+            np.testing.assert_array_equal(kn.bids[k], own, err_msg="self-consistency: X_k[i] != X_i[i]")
+        assert not alloc.conflicts, f"conflicts under global communication (thesis §4.3): {alloc.conflicts}"
     scoring = scoring_options(env)
     ref_score, ref_valid = reference_team_score(s, alloc.paths, conflict_policy=env.config.conflict_policy, **scoring)
     assert set(alloc.valid_tasks) == ref_valid, f"valid tasks {alloc.valid_tasks} vs reference {sorted(ref_valid)}"
@@ -279,13 +280,13 @@ def check_converged_allocation(env: TaskAllocEnv, episode: Episode, *, full_comm
         members = alloc.members[j]
         assert len(members) == s.task_agents[j]
         have = s.agent_equipment[list(members)].sum(axis=0)
-        assert np.all(have >= s.task_equipment[j]), f"valid task {j} lacks equipment (§8.8)"
+        assert np.all(have >= s.task_equipment[j]), f"valid task {j} lacks equipment ((3.5))"
         for m_ in np.flatnonzero(s.task_prereqs[j]):
-            assert int(m_) in alloc.valid_tasks, f"valid task {j} has invalid prerequisite {m_} (§8.13)"
+            assert int(m_) in alloc.valid_tasks, f"valid task {j} has invalid prerequisite {m_} ((3.6))"
     for i, (path, starts) in enumerate(zip(alloc.paths, alloc.start_times)):
         for j, st in zip(path, starts):
             assert s.task_start[j] - 1e-9 <= st <= s.task_end[j], f"start {st} of task {j} outside its window"
             ready = ready_time(s, j, env.config.prereq_timing)
             assert st >= ready - 1e-9, f"agent {i} starts task {j} at {st} before its prerequisites allow ({ready})"
     for (i, j), count in episode.quits.items():
-        assert count <= 1, f"agent {i} quit task {j} {count} times (§5.3 quit once)"
+        assert count <= 1, f"agent {i} quit task {j} {count} times (thesis §5.2.2: once)"

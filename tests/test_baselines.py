@@ -1,8 +1,9 @@
 """Scripted baselines and centralised solvers: the decisions of the thesis's examples, CBBA = SGA, the 50% bound,
 exact ≥ SGAMA ≥ ..., CBGABI's effect at L_j = N/1 (Fig 5.7/5.13), determinism, and policy plumbing.
 
-Spec sections: cbga §5.1–5.4 (Fig 5.1, Fig 5.3, team bidding, quitting), §6.6 (Appendix A), §6.7 (SGAMA), §8.15,
-§8.19; cbba_acbba §3–4 (SGA, CBBA), §8.10–8.11 (CBBA = SGA, ≥ 50% of optimal).
+Sources: thesis §5.1–5.3 (Fig 5.1, Fig 5.3, team bidding (5.5), quitting Alg 9), App. A.1–A.2 (Tables A.1–A.10),
+§3.3.3 (SGAMA, Alg 7), §3.2.3 (single-agent tasks use the CBBA consensus); Johnson §3.3–3.4 (SGA, CBBA); Choi et
+al. 2009 (CBBA = SGA, ≥ 50 % of optimal; restated in thesis §2.2.4, Johnson §1.2).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ def act_on(env: TaskAllocEnv, actions: dict[str, int]):
     return env.step({a: actions.get(a, 0) for a in env.agents})
 
 
-# -- Appendix A bundle phases (thesis A.1, A.2; spec cbga §6.6) --------------------------------------------------------
+# -- Appendix A bundle phases (thesis App. A.1, A.2) -----------------------------------------------------------------
 def appendix_scenario(agents_per_task: int):
     """A1 (0,0), A2 (4,0), A3 (4,4), A4 (8,4): the line A1–A2–A3–A4 at range 4. λ = 0 and γ = 1 with the start
     distance cost, so c_ij = c̄_j − ‖pos_i − pos_j‖ wherever j fits. A1 and A2 are equidistant from T2 and T3, A3
@@ -106,7 +107,7 @@ def test_appendix_a2_cbga_bundle_phases():
     assert kn.bids[0, 0, 4] == pytest.approx(67.0)
 
 
-# -- Fig 5.3: team-focused choice (spec cbga §5.2 unit-test example) -----------------------------------------------
+# -- Fig 5.3: team-focused choice (thesis §5.2.1, (5.5), Fig 5.3) ---------------------------------------------------
 def fig_5_3_env() -> TaskAllocEnv:
     """Agent 0: c = 60 on T2 (free, L = 1), c = 50 on T3 (L = 3, holding bids 90 and 80), c = 70 on T1 (L = 1, held
     at 95, so not valid). γ = 10 with the start distance: c = 100 − 10·d."""
@@ -131,11 +132,11 @@ def test_fig_5_3_team_bidding_picks_the_nearly_full_group(policy, choice):
     policy.start(env)
     assert policy.act(obs)["uav_0"] == choice
     act_on(env, {"uav_0": choice})
-    assert kn.bids[0, 0, choice - 1] == pytest.approx({2: 60.0, 3: 50.0}[choice]), "the stored bid is c_ij (§8.19)"
+    assert kn.bids[0, 0, choice - 1] == pytest.approx({2: 60.0, 3: 50.0}[choice]), "the stored bid is c_ij"
 
 
 def test_team_value_net_does_not_reward_outbidding_a_single_agent_task():
-    """spec cbga §5.2 ``team_value``: agent 0 can take T0 (L = 1, c = 60) from agent 1 (50), or join T1 (L = 2,
+    """``team_value`` (thesis §5.2.1, (5.5)): agent 0 can take T0 (L = 1, c = 60) from agent 1 (50), or join T1 (L = 2,
     c = 50) next to agent 2 (40). ``net``: T0 is worth 60 − 50 + 50 = 60, T1 40 + 50 = 90 → T1. ``literal`` (5.5)
     as printed: T0 is worth 50 + 60 = 110 → T0. Individually T0 (60 > 50)."""
     agents = [agent(0), agent(4, 5), agent(0, 5, 6)]
@@ -184,7 +185,7 @@ def test_fig_5_1_team_bidding_sends_both_agents_to_the_group_task(policy, team):
         assert alloc.score == pytest.approx(99 + 90 - 20)
 
 
-# -- CBBA = SGA (Choi et al. 2009; spec cbba_acbba §8.10) --------------------------------------------------------------
+# -- CBBA = SGA (Choi et al. 2009; thesis §3.3.3; Johnson §3.4) -------------------------------------------------------
 def cbba_env(seed: int, **extra) -> TaskAllocEnv:
     rng = np.random.default_rng(seed)
     return TaskAllocEnv(n_agents=int(rng.integers(2, 6)), n_tasks=int(rng.integers(3, 10)), agents_per_task=1,
@@ -235,7 +236,7 @@ def test_cbba_matches_sga_on_random_scenarios():
 
 @pytest.mark.slow
 def test_cbba_scores_at_least_half_the_optimum():
-    """cbba_acbba §8.11: on tiny instances CBBA ≥ 0.5 × the exact optimum (and ≤ it)."""
+    """The 50 % bound (Choi et al. 2009; thesis §2.2.4, Johnson §1.2): on tiny instances CBBA ≥ 0.5 × the optimum."""
     for seed in range(100):
         rng = np.random.default_rng(seed)
         env = TaskAllocEnv(n_agents=int(rng.integers(2, 4)), n_tasks=int(rng.integers(2, 6)), agents_per_task=1,
@@ -247,8 +248,8 @@ def test_cbba_scores_at_least_half_the_optimum():
 
 
 def test_sgama_with_single_agent_tasks_is_sga():
-    """cbba_acbba §3: each SGA iteration assigns the single highest remaining marginal gain; winning scores are
-    non-increasing under DMG (§8.6) and each task is assigned at most once (§8.4)."""
+    """Johnson §3.3.1: each SGA iteration assigns the single highest remaining marginal gain; winning scores are
+    non-increasing under DMG and each task is assigned at most once."""
     for seed in range(20):
         env = cbba_env(seed)
         env.reset(seed=seed)
@@ -320,7 +321,7 @@ def test_exact_matches_brute_force():
         assert exact(s, cfg).score == pytest.approx(best)
 
 
-# -- quitting and team bidding where the thesis says they matter (Fig 5.7 / 5.13, spec cbga §5.4) ---------------------
+# -- quitting and team bidding where the thesis says they matter (thesis §5.3.2, Figs 5.7 / 5.13) --------------------
 def test_cbgabi_completes_more_tasks_when_every_task_needs_everyone():
     """10 agents, 20 tasks, every L_j = 10 (E5.2 vs E5.7: 7295 → 9391): base CBGA strands agents on groups that never
     fill; CBGABI completes more tasks on most seeds and scores more on average."""
@@ -381,7 +382,7 @@ def test_cbba_policy_rejects_multi_agent_tasks():
 
 
 def test_cbga_reduces_to_cbba_on_single_agent_tasks():
-    """spec cbga §8.15: with every L_j = 1, CBGA and the CBBA baseline give the same allocation and score."""
+    """Thesis §3.2.3 (single-agent tasks use the CBBA consensus): with every L_j = 1, CBGA and CBBA agree."""
     for seed in range(10):
         env = TaskAllocEnv(n_agents=4, n_tasks=8, agents_per_task=1)
         a = rollout(env, CBGAPolicy(), seed=seed)

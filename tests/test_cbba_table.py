@@ -1,10 +1,10 @@
-"""The CBBA decision table for single-agent tasks (spec cbga §4.2; spec cbba_acbba §4.2 Table 3.1, §8.7).
+"""The CBBA decision table for single-agent tasks (Choi et al. 2009; Johnson §3.4.1 Table 3.1; thesis Table 2.1).
 
 Every cell of the table is one parametrised case below. Inside a case, every combination of the conditions the
 table can read is enumerated: the sender's timestamp for the agent it believes in (m) newer / equal / older than the
 receiver's, the same for the receiver's third agent (n), and the sender's bid higher / equal / lower than the
-receiver's (equal bids go to the higher winner id, spec cbga §4.5). The expected action is written from the spec
-table; ``decide`` is called once vectorised over all combinations and once per combination.
+receiver's (equal bids go to the higher winner id, thesis §3.2.3 and App. A.1). The expected action is written
+from Johnson's Table 3.1; ``decide`` is called once vectorised over all combinations and once per combination.
 
 Agent ids: receiver i = 1, sender k = 2, third agents m = 3 and n = 4 (agent 0 exists but is never named), so a tie
 between (k, m) goes to m and a tie between (k, i) or (m, i) goes to the sender's winner.
@@ -48,7 +48,7 @@ def _reset(c):
     return RESET
 
 
-# (sender believes, receiver believes, rule from spec cbga §4.2, the rule as the spec prints it).
+# (sender believes, receiver believes, rule of Johnson §3.4.1 Table 3.1, the rule as that table prints it).
 # c.better: y_k ≻ y_i; c.fresh_m / c.stale_m: s_k[m] > s_i[m] / s_i[m] > s_k[m] for the sender's winner m;
 # c.fresh_n: s_k[n] > s_i[n] for the receiver's winner n (written "m" in the rows where the sender believes k, i
 # or none, because there the receiver's third agent is the only third agent).
@@ -76,7 +76,7 @@ CANONICAL = [
     ("none", "none", _leave, "leave"),
 ]
 
-# The thesis transcription (Table 2.1 of the thesis, spec cbga §10) differs in exactly two cells.
+# The thesis transcription (thesis §2.2.4, Table 2.1) differs in exactly two cells.
 THESIS_DIFF = {
     ("i", "third"): (_leave, "leave (the thesis prints 'if s_km > s_im → leave')"),
     ("m", "i"): (lambda c: UPDATE if c.fresh_m or c.better else LEAVE, "update if s_k[m] > s_i[m] or y_k ≻ y_i"),
@@ -134,7 +134,7 @@ def test_cbba_table_cell(table, sender_belief, receiver_belief, rule, text):
 
 @pytest.mark.parametrize("table, rows", [("canonical", CANONICAL), ("thesis", THESIS)])
 def test_every_pair_of_winner_ids_follows_its_cell(table, rows):
-    """spec cbba_acbba §8.7: each (sender's winner, receiver's winner) pair of *actual ids* — every agent 0..4 or none,
+    """Table completeness: each (sender's winner, receiver's winner) pair of *actual ids* — every agent 0..4 or none,
     third agents on either side of i and k in id order — is decided by the one cell that names the pair's roles."""
     rule = {(s, r): f for s, r, f, _ in rows}
     role = {I_ID: "i", K_ID: "k"}
@@ -198,7 +198,7 @@ def test_decide_broadcasts_over_receivers():
 @pytest.mark.parametrize("a, ida, b, idb, expected", [
     (60.0, 1, 50.0, 9, True),      # higher bid wins whatever the ids
     (50.0, 9, 60.0, 1, False),
-    (50.0, 4, 50.0, 3, True),      # equal bids: the higher id wins (spec cbga §4.5)
+    (50.0, 4, 50.0, 3, True),      # equal bids: the higher id wins (thesis §3.2.3)
     (50.0, 3, 50.0, 4, False),
     (50.0, 3, 50.0, 3, False),     # not strictly better than itself
 ])

@@ -1,5 +1,5 @@
-"""Configuration: defaults from the spec, YAML scenarios, and bad input naming the offending field (spec cbga §6.1,
-§11); infeasible requirements are reported by ``Scenario.infeasible_tasks``, not raised."""
+"""Configuration: defaults from the sources (thesis §3.3.2; docs/configuration.md), YAML scenarios, and bad input
+naming the offending field; infeasible requirements are reported by ``Scenario.infeasible_tasks``, not raised."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from taskalloc_env.config import round_bound, to_mapping
 
 
 def test_spec_defaults():
-    """spec cbga §11: the default of every named option (distance_cost is a documented implementation decision)."""
+    """The default of every named option (docs/configuration.md; distance_cost: docs/decisions.md)."""
     cfg = TaskAllocConfig()
     assert cfg.prereq_mode == "all_have_bid"
     assert cfg.prereq_timing == "conservative"
@@ -32,7 +32,7 @@ def test_spec_defaults():
 
 
 def test_default_scenario_is_the_thesis_setup():
-    """spec cbga §6.1: 10 agents, 20 tasks, 5 × 5 × 2 km, 20 m/s, c̄ = 100, λ = γ = 0.8, windows and durations 5."""
+    """Thesis §3.3.2: 10 agents, 20 tasks, 5 × 5 × 2 km, 20 m/s, c̄ = 100, λ = γ = 0.8, windows and durations 5."""
     cfg = load_config("default")
     assert (cfg.n_agents, cfg.n_tasks) == (10, 20)
     assert cfg.arena == (5.0, 5.0, 2.0)
@@ -54,7 +54,7 @@ def test_shipped_scenarios_load_and_run(name):
 
 
 def test_units_raw_keeps_the_speed():
-    """spec cbga §6.1: ``km_min`` converts 20 m/s to 1.2 km/min; ``raw`` uses the number as given."""
+    """Our unit reading: ``km_min`` converts 20 m/s to 1.2 km/min; ``raw`` uses the number as given."""
     assert TaskAllocConfig(units="raw", speed=3.0).speed_internal == 3.0
     assert TaskAllocConfig(speed=10.0).speed_internal == pytest.approx(0.6)
 
@@ -70,7 +70,7 @@ def test_round_trip_through_a_mapping(tmp_path):
 
 
 def test_round_bound_formula():
-    """spec cbga §4.4: T_max = 10 · max(N_m, N_n · max L_j) · D."""
+    """Our round bound (docs/decisions.md): T_max = 10 · max(N_m, N_n · max L_j) · D."""
     assert round_bound(20, 10, 4, 1) == 10 * 40
     assert round_bound(20, 3, 2, 3) == 10 * 20 * 3
 
@@ -158,7 +158,7 @@ def test_generated_infeasible_mix_is_reported():
 
 
 def test_equipment_items_must_match_required_agents():
-    """|te_j| = L_j (spec cbga §1.1, [T3.1.3]): with fewer items than agents the slot rule of §3.4 (a newcomer must
+    """|te_j| = L_j (thesis §3.1.3): with fewer items than agents the slot rule of ``groups.admit`` (a newcomer must
     fill an unmet item) could never fill the group, so such tasks are refused, naming the field and the rule."""
     with pytest.raises(ConfigError, match=r"task_mix\.agents"):
         resolve_config({"n_agents": 4, "n_tasks": 1, "agent_types": ["A"],

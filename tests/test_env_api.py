@@ -43,7 +43,7 @@ CONFIGS = {
                    "require_known_capacity": True},
     "every_step": {"n_agents": 3, "n_tasks": 5, "agents_per_task": [1, 2], "consensus": "every_step"},
     "task_quitting": {"n_agents": 4, "n_tasks": 5, "agents_per_task": 3, "task_quitting": True},
-    # a task needing more agents than exist is infeasible, which is reported, not an error (spec cbga §1.4)
+    # a task needing more agents than exist is infeasible, which is reported, not an error
     "infeasible_groups": {"n_agents": 2, "n_tasks": 3, "agents_per_task": [1, 3]},
 }
 CONFIG_IDS = list(CONFIGS)
@@ -194,7 +194,7 @@ def test_reset_with_the_same_seed_replays_the_instance():
     assert data_equivalence(obs1, obs2)
 
 
-# -- episode return (spec cbga §1.7) -----------------------------------------------------------------------------
+# -- episode return (the team score, thesis §5.3.1) --------------------------------------------------------------
 @pytest.mark.parametrize("scale", [1.0, 100.0])
 def test_episode_return_equals_evaluate_score(scale):
     trace, alloc = _masked_random_episode({"n_agents": 4, "n_tasks": 6, "agents_per_task": [1, 2],
@@ -204,7 +204,7 @@ def test_episode_return_equals_evaluate_score(scale):
 
 
 def test_round_bound_truncates():
-    """spec cbga §4.4: a run that has not converged by T_max (``max_rounds``) is truncated, not terminated."""
+    """A run that has not converged by our round bound T_max (``max_rounds``) is truncated, not terminated."""
     e = TaskAllocEnv(n_agents=4, n_tasks=6, agents_per_task=2, max_rounds=1)
     obs, infos = e.reset(seed=0)
     policy = CBGAPolicy()

@@ -1,4 +1,5 @@
-"""The two-pass merge of multi-agent task columns (spec cbga §4.3, Alg 6 with its guards; §3.4; §4.5; §8.1, 8.9–8.11).
+"""The two-pass merge of multi-agent task columns (thesis §3.2.3, Alg 6 with its guards, eq. (3.15); ties to the
+higher id; capacity, same-equipment replacement and the top-L_j property).
 
 Each case builds one receiver column and one sender column by hand and states the expected column from the rules:
 Pass A refreshes the receiver's members (the sender is trusted for m if m = k or s_k[m] > s_i[m]; the receiver is
@@ -113,7 +114,7 @@ def test_full_group_ties_go_to_the_higher_id():
 
 
 def test_receiver_itself_can_be_displaced():
-    """n* may be i: that is how the receiver learns it lost the task (spec cbga §4.3 notes)."""
+    """n* may be i: that is how the receiver learns it lost the task (Alg 6 l. 18–20)."""
     assert run({RECEIVER: 30, 2: 50}, {SENDER: 40}, 2) == {SENDER: 40, 2: 50}
     assert run({RECEIVER: 45, 2: 50}, {SENDER: 40}, 2) == {RECEIVER: 45, 2: 50}
 
@@ -129,7 +130,7 @@ TYPES = ["A", "A", "A", "B", "B", "C"]          # agents 0-2 type A, 3-4 type B,
 
 
 def test_equipment_room_only_for_a_needed_type():
-    """te = {A, B}, one A member: a second A has no slot, a B takes the free one (spec cbga §4.3 equipment text)."""
+    """te = {A, B}, one A member: a second A has no slot, a B takes the free one (thesis §3.2.3 equipment text)."""
     eq = typed(TYPES, {"A": 1, "B": 1})
     assert run({RECEIVER: 50}, {3: 10}, 2, fresher=(3,), equipment=eq) == {RECEIVER: 50, 3: 10}
     assert run({RECEIVER: 50}, {2: 40}, 2, fresher=(2,), equipment=eq) == {RECEIVER: 50}
@@ -157,7 +158,7 @@ def test_equipment_tie_break_within_the_same_type():
     assert run({2: 50, 3: 40}, {SENDER: 50}, 2, equipment=eq) == {2: 50, 3: 40}
 
 
-# -- Appendix A.2 round 1 at agent A2 (spec cbga §6.6; thesis Tables A.5, A.6, A.8) --------------------------------
+# -- Appendix A.2 round 1 at agent A2 (thesis App. A.2, Tables A.5, A.6, A.8) ---------------------------------------
 def test_appendix_a2_merge_is_independent_of_sender_order():
     """A2 merges A1's and A3's first bids on T3 (L = 2, all 72.4): the two higher ids stay, whatever the order."""
     a2 = {1: 72.4}
@@ -211,8 +212,8 @@ def merge_inputs(draw):
 @settings(max_examples=300, deadline=None)
 @given(merge_inputs())
 def test_merge_properties(inputs):
-    """Capacity (§8.1), entries come from one of the two views, the receiver's row only shrinks, same-type parity
-    (§8.9), equipment never in surplus, and the vectorised call equals one call per receiver."""
+    """Capacity (thesis (3.4)), entries come from one of the two views, the receiver's row only shrinks, same-type
+    parity ((3.15)), equipment never in surplus, and the vectorised call equals one call per receiver."""
     bids_i, bids_k, receivers, senders, s_i, s_k, required, eq = inputs
     out = merge(bids_i.copy(), bids_k, receivers, senders, s_i, s_k, required, eq)
     assert np.all((out > 0).sum(axis=1) <= required[None, :])

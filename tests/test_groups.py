@@ -1,4 +1,4 @@
-"""One admission rule for the bid mask and the consensus merge (spec cbga §3.4, §4.3).
+"""One admission rule for the bid mask and the consensus merge (thesis Alg 5 l. 8–20; Alg 6 l. 13–23, (3.15)).
 
 Agent i's bid mask says whether i may join column j of its own table (and whom it displaces). When i then bids and
 sends its table to a receiver that holds the same column as i did before the bid, the merge must reach the same

@@ -1,11 +1,12 @@
-"""Property tests over random scenarios (hypothesis): the testable properties of spec cbga §8 for every CBGA variant.
+"""Property tests over random scenarios (hypothesis): invariants of the rules in docs/algorithm.md, every CBGA variant.
 
 Every example draws a small scenario configuration (L_j mixes, equipment, prerequisites, scoring and protocol
 options) and runs one episode with a scripted bidder, checking the local-table invariants after every step
-(``helpers.check_tables``: capacity §8.1–8.2, self-consistency §8.4, bundle/path §8.5, path feasibility §8.6,
-equipment §8.7–8.8) and the converged allocation at the end (``helpers.check_converged_allocation``: agreement
-§8.3, conflicts §8.23, validity, windows §8.14, prerequisites §8.13, score §8.22 against the reference, episode
-return = ``evaluate().score``, quit at most once).
+(``helpers.check_tables``: capacity (3.4), one winner per single-agent task, self-consistency, bundle/path, path
+feasibility (3.7), equipment §3.1.3 and (3.5)) and the converged allocation at the end
+(``helpers.check_converged_allocation``: agreement §3.2.3, no conflicts under full communication §4.3, validity,
+windows, prerequisites (3.6), the team score §5.3.1 against the reference, episode return = ``evaluate().score``,
+quit at most once §5.2.2). Section and equation numbers are the thesis's.
 """
 
 from __future__ import annotations
@@ -88,8 +89,8 @@ def make_env(kw: dict, policy, **extra) -> TaskAllocEnv:
 
 
 class StableBids:
-    """spec cbga §3.6: a stored bid is not recomputed while its task stays in the bundle (CBBA convention); and
-    Q_i[j] never goes back to 0 (§5.3 quit once)."""
+    """A stored bid is not recomputed while its task stays in the bundle (CBBA convention, Johnson §3.2.3); and
+    Q_i[j] never goes back to 0 (quit once, thesis §5.2.2)."""
 
     def __init__(self) -> None:
         self.held: dict[tuple[int, int], float] = {}
@@ -135,8 +136,8 @@ def test_every_variant_converges_fast_subset(kw, variant, seed, scale):
 @given(kw=scenario_config(limited_comms=True), variant=st.sampled_from(["cbga", "cbgabi"]),
        seed=st.integers(0, 2**16))
 def test_limited_communication(kw, variant, seed):
-    """Ch.4: per component the tables agree at the end (§8.3); an isolated agent with ``require_known_capacity``
-    never holds an L_j > 1 task (§8.23); conflicts may exist but the score follows §1.7 / ``conflict_policy``."""
+    """Thesis ch. 4: per component the tables agree at the end; an isolated agent with ``require_known_capacity``
+    never holds an L_j > 1 task (§4.3); conflicts may exist but the score follows ``team_score``."""
     policy = VARIANTS[variant]()
     env = make_env(kw, policy)
     episode = run_episode(env, policy, seed, check=check_tables)
@@ -162,17 +163,17 @@ def test_limited_communication(kw, variant, seed):
 @given(kw=scenario_config(distance_costs=("leg",)), variant=st.sampled_from(["cbga", "cbgabi"]),
        seed=st.integers(0, 2**16))
 def test_leg_cost_keeps_the_table_invariants(kw, variant, seed):
-    """``distance_cost = leg`` (the spec's default) is not DMG (cbba_acbba §1.6), so runs may cycle and are cut at
-    300 steps; the per-step invariants must still hold and the return must still equal the score."""
+    """``distance_cost = leg`` (a literal reading of (3.9)) is not DMG (Johnson (3.13)), so runs may cycle and are
+    cut at 300 steps; the per-step invariants must still hold and the return must still equal the score."""
     policy = VARIANTS[variant]()
     env = make_env(kw, policy, max_cycles=300)
     episode = run_episode(env, policy, seed, check=check_tables)
     assert abs(episode.episode_return - episode.allocation.score) < 1e-6
 
 
-# -- the action mask against an independent reading of §3.3–3.4 and §5.3 -----------------------------------------
+# -- the action mask against an independent reading of Alg 5 l. 8–20 and Alg 9 ------------------------------------
 def expected_bid_mask(env: TaskAllocEnv, i: int) -> tuple[np.ndarray, np.ndarray]:
-    """(allowed bids, c_ij) for agent i from its own table, written from spec cbga §3.2–3.4 with loops."""
+    """(allowed bids, c_ij) for agent i from its own table, written from (3.11) and Alg 5 l. 8–20 with loops."""
     p = env.protocol
     s = p.scenario
     cfg = env.config
@@ -205,7 +206,7 @@ def expected_bid_mask(env: TaskAllocEnv, i: int) -> tuple[np.ndarray, np.ndarray
                                  "any_has_bid": any(has_bid)}[cfg.prereq_mode]:
             continue                                                        # filter 2: prerequisites
         L = int(s.task_agents[j])
-        if L > 1:              # filter 4: everyone is known (§2.1) unless the agents discover each other
+        if L > 1:              # capacity filter: everyone is known (thesis §3.2.1) unless agents discover each other
             known = np.flatnonzero(kn.known[i]) if cfg.require_known_capacity else np.arange(s.n_agents)
             able = [k for k in known if not te or ae[k] & set(te)]
             have = s.agent_equipment[known].sum(axis=0)
@@ -272,10 +273,10 @@ def team_value(env: TaskAllocEnv, i: int, j: int, gain: float, literal: bool) ->
 @given(kw=st.one_of(scenario_config(small=True), scenario_config(small=True, limited_comms=True)),
        variant=st.sampled_from(["cbga", "cbgabi", "cbga+tb", "cbgabi-literal-delta2"]), seed=st.integers(0, 2**16))
 def test_masks_gains_and_choices_follow_the_spec(kw, variant, seed):
-    """After every step: the bid mask equals the eligibility filters and the outbid test of §3.3–3.4 recomputed from
+    """After every step: the bid mask equals the eligibility filters and the outbid test of Alg 5 recomputed from
     each agent's own table; the gains in the observation equal the brute-force (3.11); the quit mask equals Alg 9's
     conditions; the scripted choice is the argmax of c_ij (individual) or of the team value (5.5) with ties to the
-    lower task id, quits first (§5.2–5.3); and the bid the protocol stores is c_ij, in both modes (§8.19)."""
+    lower task id, quits first (thesis §5.2); and the bid the protocol stores is c_ij, in both modes."""
     kw = {**kw, "quit_block": "none"}
     policy = VARIANTS[variant]()
     env = make_env(kw, policy)

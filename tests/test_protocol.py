@@ -1,9 +1,10 @@
 """The consensus protocol: exchange, timestamps, multi-hop propagation, outbid release, quit timers and quitting,
 discovery, message accounting, convergence, and the consensus steps of the thesis's Appendix A.
 
-Spec sections: cbga §2.2 (messages, discovery, data volume), §2.4 (timestamps), §3.8 (release), §4.1–4.4
-(exchange, iteration, convergence), §5.3 (quitting), §6.6 (Appendix A), §8.12, 8.16–8.18, 8.20, 8.21, 8.23;
-cbba_acbba §4.3 (release), §4.4 and §8.9 (round bound).
+Sources: thesis §4.2.2 and §4.3 (messages, discovery, data volume), eq. (2.4) and Alg 6 l. 24 (timestamps),
+§2.2.4 (release), §3.2.3 (exchange and iteration), §5.2.2 and Alg 9 (quitting), App. A.1–A.2; Johnson §3.4.1
+(release (3.11)–(3.12), the CBBA round bound); article eq. (10). Convergence detection is our rule
+(docs/decisions.md).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ def line_positions(n: int, spacing: float = 1.0) -> np.ndarray:
     return np.array([[spacing * i, 0.0, 0.0] for i in range(n)])
 
 
-# -- outbid release (spec cbga §3.8, cbba_acbba §4.3, §8.12–8.13) ---------------------------------------------------
+# -- outbid release (thesis §2.2.4; Johnson (3.11)–(3.12)) ----------------------------------------------------------
 def release_scenario(agents_per_task: int):
     """Agent 0 at the origin values T0, T1, T2 at 80 each (γ = 10, 2 away); windows open at 100, 200, 300, so the
     path order is T0, T1, T2 whatever the bundle order. Agents 1 and 2 sit 0.5 from T0 and bid 95 on it."""
@@ -46,16 +47,16 @@ def release_scenario(agents_per_task: int):
 @pytest.mark.parametrize("order, kept", [("bundle", [2]), ("path", [])])
 def test_outbid_release_single_agent_tasks(order, kept):
     p = protocol(release_scenario(1), release_order=order)
-    for j in (2, 0, 1):                             # bundle [T2, T0, T1], path [T0, T1, T2]
+    for j in (2, 0, 1):                             # bundle (T2, T0, T1), path (T0, T1, T2)
         assert p.bid(0, j) == pytest.approx(80.0)
     assert p.knowledge.bundles[0] == [2, 0, 1] and p.knowledge.paths[0] == [0, 1, 2]
     p.bid(1, 0)
     p.end_round()
     kn = p.knowledge
     assert kn.bundles[0] == kept and kn.paths[0] == kept
-    # the lost task keeps the new winner's entry (cbba §4.3: n > n̄ only is reset)
+    # the lost task keeps the new winner's entry (only n > n̄ is reset; Johnson (3.11) prints n ≥ n̄)
     assert kn.winner[0, 0] == 1 and kn.bids[0, 1, 0] == pytest.approx(95.0)
-    # released tasks: own bids zeroed in the same iteration (§8.12), no winner left behind
+    # released tasks: own bids zeroed in the same iteration, no winner left behind
     for j in {0, 1, 2} - set(kept):
         assert kn.bids[0, 0, j] == 0
     assert kn.winner[0, 1] == NONE
@@ -90,7 +91,7 @@ def check_consistency(p: Protocol) -> None:
 
 
 def test_bid_on_a_full_group_displaces_the_minimum_locally():
-    """spec cbga §3.6 [INF]: a bid into a full task zeroes the displaced member's entry so that n_j ≤ L_j."""
+    """Our choice (docs/decisions.md): a bid into a full task zeroes the displaced member's entry so n_j ≤ L_j."""
     s = build([agent(0), agent(1), agent(2)], [task(1, agents=2)])
     p = protocol(s)
     p.bid(1, 0)
@@ -117,8 +118,9 @@ def line_protocol(n: int, tasks, **options) -> Protocol:
 
 @pytest.mark.parametrize("agents_per_task", [1, 2])
 def test_bid_reaches_the_far_end_after_d_rounds(agents_per_task):
-    """A bid travels one hop per round (messages are snapshots, spec cbga §4.1): on a line of 5 (D = 4) agent 4 learns
-    agent 0's bid in round 4, not earlier; the table rules rely on relayed stamps for this (spec cbga §2.4)."""
+    """A bid travels one hop per round (messages are snapshots, our choice; thesis §4.3: a bid needs up to D rounds):
+    on a line of 5 (D = 4) agent 4 learns agent 0's bid in round 4, not earlier; the table rules rely on relayed
+    stamps for this (thesis eq. (2.4))."""
     p = line_protocol(5, [task(2, agents=agents_per_task)])
     assert p.graph.diameter == 4
     p.bid(0, 0)
@@ -157,9 +159,10 @@ def test_timestamp_is_stamped_after_conflict_resolution():
 
 
 def test_relayed_release_propagates():
-    """A dropped bid spreads (cbba §8.22, §4.3): on the line 0–1–2, agent 2 bids T0 then T1; agent 1 outbids it on
-    T0, so agent 2 releases T1 (added after T0). Agent 0 first learns agent 2 holds T1 (relayed), then — through
-    the rule 'sender believes none, receiver believes m: update if s_k[m] > s_i[m]' — that nobody does."""
+    """A dropped bid spreads (Johnson (3.11)–(3.12) and Table 3.1): on the line 0–1–2, agent 2 bids T0 then T1;
+    agent 1 outbids it on T0, so agent 2 releases T1 (added after T0). Agent 0 first learns agent 2 holds T1
+    (relayed), then — through the rule 'sender believes none, receiver believes m: update if s_k[m] > s_i[m]' —
+    that nobody does."""
     agents = [agent(0), agent(1), agent(2)]
     tasks = [task(1, 0.1, start=100), task(2, 0, 1, start=200)]
     p = protocol(build(agents, tasks), comm_range=1.0)
@@ -177,7 +180,7 @@ def test_relayed_release_propagates():
     assert kn.winner[:, 1].tolist() == [NONE, NONE, NONE]
 
 
-# -- discovery (spec cbga §2.2 Table 4.5, §8.20) and isolation (§8.23) ----------------------------------------------
+# -- discovery (thesis §4.2.2, Table 4.5) and isolation (thesis §4.3) ------------------------------------------------
 def test_agents_discover_their_component_through_bids():
     """Each agent bids its own task: after D rounds every agent knows every agent of the line (discovery by triples)."""
     n = 4
@@ -191,9 +194,9 @@ def test_agents_discover_their_component_through_bids():
 
 
 def test_agents_discover_their_component_without_bids():
-    """spec cbga §8.20: agents starting with only themselves know every agent in their component within D
-    iterations. Messages carry the timestamp vector as (agentID, time) pairs (§2.2), so IDs spread even when nobody
-    has bid yet."""
+    """Thesis §4.2.2: agents starting with only themselves know every agent in their component within D
+    iterations. Messages carry the timestamp vector as (agentID, time) pairs (our choice), so IDs spread even when
+    nobody has bid yet."""
     n = 4
     p = line_protocol(n, [task(1, agents=2)], require_known_capacity=True)
     for _ in range(p.graph.diameter):
@@ -203,8 +206,9 @@ def test_agents_discover_their_component_without_bids():
 
 
 def test_require_known_capacity_gates_multi_agent_bids():
-    """spec cbga §3.3 filter 4 / §8.23: knowing only itself, an agent places no bid on an L_j > 1 task; after first
-    contact with a neighbour it may. An isolated agent never may, though it may bid on single-agent tasks."""
+    """``require_known_capacity`` (after thesis §4.3): knowing only itself, an agent places no bid on an L_j > 1
+    task; after first contact with a neighbour it may. An isolated agent never may, though it may bid on
+    single-agent tasks."""
     agents = [agent(0), agent(1), agent(5)]
     tasks = [task(0.5, agents=2), task(4.5)]
     p = protocol(build(agents, tasks), comm_range=1.0, require_known_capacity=True)
@@ -221,22 +225,22 @@ def test_require_known_capacity_gates_multi_agent_bids():
 
 @pytest.mark.parametrize("edge_rule, linked", [("dist", False), ("circles_overlap", True)])
 def test_edge_rule(edge_rule, linked):
-    """spec cbga §6.4: ``dist`` links agents within r, ``circles_overlap`` within 2r (range circles overlap)."""
+    """``edge_rule`` (our choice, thesis §4.3): ``dist`` links agents within r, ``circles_overlap`` within 2r."""
     graph = CommGraph(np.array([[0.0, 0, 0], [3.0, 0, 0]]), comm_range=2.0, edge_rule=edge_rule)
     assert bool(graph.adjacency[0, 1]) is linked and bool(graph.adjacency[1, 0]) is linked
     assert bool(np.isfinite(graph.hops).all()) is linked and graph.diameter == (1 if linked else 0)
 
 
 def test_agents_with_several_equipment_items_are_refused():
-    """One equipment type per agent (spec cbga §1.4: |ae_i| = 1 in every experiment). With an agent carrying B and C
+    """One equipment type per agent (|ae_i| = 1 in every experiment, thesis §3.3.4). With an agent carrying B and C
     on a task needing {B, C}, coverage counted as a multiset union depends on the order members join, and two agents
-    can converge on different tables (§8.3); such scenarios are refused with the reason."""
+    can converge on different tables; such scenarios are refused with the reason."""
     with pytest.raises(ValueError, match="several equipment items"):
         build([agent(0, equipment=("B",)), agent(3, equipment=("B", "C"))],
               [task(2, agents=2, equipment=("B", "C"))])
 
 
-# -- message accounting (spec cbga §2.2, §8.21) ---------------------------------------------------------------------
+# -- message accounting (thesis §4.2.2, §4.3) -----------------------------------------------------------------------
 def test_message_and_data_item_accounting():
     """One message per (sender, receiver) pair; a message holds 3·u + N_n items, u = positive entries of the sender's
     table."""
@@ -255,7 +259,7 @@ def test_message_and_data_item_accounting():
 
 
 def test_converged_message_size_formula():
-    """§8.21: at convergence (full comms) each message holds 3·Σ_j |members(j)| + N_n ≤ 3·Σ_j L_j + N_n items."""
+    """Thesis §4.3: at convergence (full comms) each message holds 3·Σ_j |members(j)| + N_n ≤ 3·Σ_j L_j + N_n items."""
     s = generate(TaskAllocConfig(n_agents=4, n_tasks=5, agents_per_task=2, start_time_range=(0.0, 20.0)),
                  np.random.default_rng(3))
     env = TaskAllocEnv(scenario=s, agents_per_task=2)
@@ -268,7 +272,7 @@ def test_converged_message_size_formula():
     assert per_message <= 3 * s.task_agents.sum() + s.n_agents
 
 
-# -- quitting (spec cbga §5.3, §8.16–8.18) ----------------------------------------------------------------------------
+# -- quitting (thesis §5.2.2, Alg 9, (5.6); article eq. (10)) ---------------------------------------------------------
 def quit_scenario():
     """Three agents, T0 needs all three (L = 3), T1 is a single-agent task after it."""
     return build([agent(0), agent(1), agent(2)], [task(1, agents=3, start=100), task(1, 1, start=200)])
@@ -276,8 +280,9 @@ def quit_scenario():
 
 @pytest.mark.parametrize("joiner", [True, False])
 def test_quit_timer_sync(joiner):
-    """§8.18: agent 0 joins T0 at T = 3 (H = 3); with δ = 1 its quit is due at T = 5. A member that appears in its
-    column at T = 5 resets H to 5 and stops the quit; without the joiner the quit is allowed at T = 5."""
+    """Group timer (thesis §5.2.2; Alg 9 l. 4–5): agent 0 joins T0 at T = 3 (H = 3); with δ = 1 its quit is due at
+    T = 5. A member that appears in its column at T = 5 resets H to 5 and stops the quit; without the joiner the quit
+    is allowed at T = 5."""
     p = protocol(quit_scenario(), task_quitting=True, delta=1)
     for _ in range(3):
         p.end_round()
@@ -295,8 +300,8 @@ def test_quit_timer_sync(joiner):
 
 
 def test_quit_releases_later_tasks_and_happens_once():
-    """§8.17: quitting zeroes i's bid, sets Q_i[j] = 1 and releases the tasks after j; the agent may bid on j again
-    (quit_block = none) but can never quit it a second time."""
+    """Alg 9 l. 6–8 and thesis §5.2.2: quitting zeroes i's bid, sets Q_i[j] = 1 and releases the tasks after j; the
+    agent may bid on j again (quit_block = none) but can never quit it a second time."""
     p = protocol(quit_scenario(), task_quitting=True, delta=1)
     p.bid(0, 0)
     p.bid(0, 1)
@@ -319,7 +324,7 @@ def test_quit_releases_later_tasks_and_happens_once():
 
 
 def test_quit_preconditions():
-    """Only with task_quitting on, only members, only incomplete groups, only after the timer (§5.3 conditions)."""
+    """Only with task_quitting on, only members, only incomplete groups, only after the timer (Alg 9 l. 2–6)."""
     s = quit_scenario()
     off = protocol(s, task_quitting=False)
     off.bid(0, 0)
@@ -342,7 +347,8 @@ def test_quit_preconditions():
 
 
 def test_quit_block_until_change():
-    """[P] 'unfeasible until other agents assign themselves': no re-bid on j until j's member count changes."""
+    """The article's rule (after its eq. (10)), 'unfeasible until other agents assign themselves': no re-bid on j
+    until j's member count changes."""
     p = protocol(quit_scenario(), task_quitting=True, delta=1, quit_block="until_change")
     p.bid(0, 0)
     for _ in range(2):
@@ -371,10 +377,10 @@ def test_reset_on_a_member_leaving(reset_on, allowed):
     assert bool(p.quit_options()[0, 0]) is allowed
 
 
-# -- convergence (spec cbga §4.4; cbba_acbba §4.4, §8.9) ------------------------------------------------------------
+# -- convergence (our stopping rule; Johnson §3.4.1's round bound for CBBA) -----------------------------------------
 def test_convergence_needs_d_plus_one_stable_rounds():
     """Nobody bids on a line with D = 3: nothing changes, and the run converges after exactly D + 1 = 4 rounds with
-    score 0 (§8.22: empty bundles contribute 0)."""
+    score 0 (empty bundles contribute 0)."""
     s = build([agent(float(i)) for i in range(4)], [task(1.5, agents=2)])
     env = TaskAllocEnv(scenario=s, comm_range=1.0)
     ep = run_episode(env, PassPolicy(), seed=0)
@@ -404,8 +410,9 @@ def _graph_scenario(kind: str, seed: int):
 @pytest.mark.parametrize("kind, diameter", [("full", 1), ("star", 2), ("ring", 3), ("line", 4)])
 @pytest.mark.parametrize("seed", range(4))
 def test_cbba_converges_within_the_round_bound(kind, diameter, seed):
-    """cbba_acbba §8.9: with DMG scores (frozen times, start-distance cost) CBBA agrees within min{N_t, L_t·N_a}·D
-    rounds; the run then needs D + 1 quiet rounds to detect it. Tables agree at the end (§8.3)."""
+    """With DMG scores (frozen times, start-distance cost) CBBA agrees within min{N_t, L_t·N_a}·D rounds (Johnson
+    §3.4.1 prints max{·}; SGA's count is min(·)·D, Johnson §3.3.2); the run then needs D + 1 quiet rounds to detect
+    it. Tables agree at the end."""
     s, comm = _graph_scenario(kind, seed)
     env = TaskAllocEnv(scenario=s, comm_range=comm, agents_per_task=1, distance_cost="from_start",
                        marginal_gain="frozen")
@@ -419,7 +426,7 @@ def test_cbba_converges_within_the_round_bound(kind, diameter, seed):
         assert np.array_equal(p.knowledge.bids[i], p.knowledge.bids[0])
 
 
-# -- Appendix A (thesis Tables A.1–A.10; spec cbga §6.6, §4.5) --------------------------------------------------------
+# -- Appendix A (thesis App. A.1–A.2, Tables A.1–A.10; ties to the higher id, §3.2.3) ----------------------------------
 A1, A2, A3, A4 = 0, 1, 2, 3
 T1, T2, T3, T4, T5 = 0, 1, 2, 3, 4
 

@@ -1,7 +1,7 @@
-"""Path timing, path score, marginal gains and the team score (spec cbga §3.1–3.2, (3.7)–(3.11), §1.5–1.7, §10;
-spec cbba_acbba §1.5–1.6, §8.1–8.3).
+"""Path timing, path score, marginal gains and the team score (thesis §3.2.2, (3.7)–(3.11); §5.3.1; Johnson
+§3.3.1 and §3.4.1: frozen service times (3.2)/(3.6), DMG (3.13)).
 
-Expected values are computed by hand in each test from the formulas of spec cbga §3.1:
+Expected values are computed by hand in each test from thesis (3.7)–(3.10):
 arr = t + leg / v (feasible iff arr < end), st = max(arr, start, ready), reward = c̄ e^{−λ(st − start)},
 cost = γ·leg (``leg``) or γ·‖pos_i^0 − pos_j‖ (``from_start``).
 """
@@ -81,7 +81,7 @@ def test_late_arrival_is_discounted_from_the_task_start():
 @pytest.mark.parametrize("timing, start", [("conservative", 13.0), ("earliest", 5.0), ("none", 5.0)])
 def test_prerequisite_timing(timing, start):
     """P window [0, 10], dur 3; follow-up F (P ∈ P_F) reached at 5: conservative waits until end_P + dur_P = 13,
-    earliest needs start_P + dur_P = 3 (already passed), none ignores P (spec cbga §1.5)."""
+    earliest needs start_P + dur_P = 3 (already passed), none ignores P (``prereq_timing``, our choice)."""
     s = build([agent(0)], [task(0, 9, reward=100, start=0, end=10, duration=3),
                            task(5, reward=100, start=0, end=20, prerequisites=(0,))],
               time_discount=LAM, distance_discount=0.0)
@@ -101,7 +101,7 @@ def test_prerequisite_that_ends_too_late_makes_the_follow_up_impossible():
 
 
 def test_reward_split_total_pays_each_member_its_share():
-    """spec cbga §10: ``total`` pays c̄_j / L_j per member (E3.7: 150 in total, 75 per member)."""
+    """``total`` pays c̄_j / L_j per member (E3.7, thesis §3.3.3: 150 in total, 75 per member)."""
     s = build([agent(0), agent(1)], [task(0, reward=150, start=10, agents=2)], distance_discount=0.0)
     per_agent = model(s).schedule(0, [0])
     total = model(s, reward_split="total").schedule(0, [0])
@@ -133,7 +133,7 @@ def test_marginal_gain_rescore_charges_the_delay_of_later_tasks(distance_cost):
 
 
 def test_marginal_gain_frozen_forbids_moving_existing_start_times():
-    """Johnson §1.5: with frozen times, inserting A before B would delay B → not allowed; no other slot fits."""
+    """Johnson (3.2)/(3.6): with frozen times, inserting A before B would delay B → not allowed; no slot fits."""
     s = two_tasks(b_start=8.0)
     gain, slot = model(s, marginal_gain="frozen").insertion_gains(0, [1])
     assert gain[0] == 0 and slot[0] == -1
@@ -143,15 +143,15 @@ def test_marginal_gain_frozen_forbids_moving_existing_start_times():
 
 
 def test_only_positive_gains_are_bids():
-    """A task whose reward cannot pay for the travel has c_ij = 0 (spec cbga §3.2 [INF])."""
+    """A task whose reward cannot pay for the travel has c_ij = 0 (only c_ij > 0 can become a bid; our choice)."""
     s = build([agent(0)], [task(5, reward=2, start=10)], distance_discount=1.0)
     gain, slot = model(s).insertion_gains(0, [])
     assert gain[0] == 0 and slot[0] == -1
 
 
 def test_leg_cost_is_not_dmg_counterexample():
-    """spec cbba_acbba §1.6 / §8.1: the detour penalty can *raise* a later bid. j at x = 10, m at x = 5 on the way:
-    c_j([]) = 100 − γ·10 but c_j([m]) = 100 − γ·5. ``from_start`` keeps c_j constant here (DMG holds)."""
+    """DMG (Johnson (3.13)) fails for the detour penalty: it can *raise* a later bid. j at x = 10, m at x = 5 on the
+    way: c_j([]) = 100 − γ·10 but c_j([m]) = 100 − γ·5. ``from_start`` keeps c_j constant here (DMG holds)."""
     s = build([agent(0)], [task(5, start=100), task(10, start=200)], distance_discount=1.0)
     leg = model(s, distance_cost="leg")
     assert leg.insertion_gains(0, [])[0][1] == pytest.approx(90.0)
@@ -186,7 +186,7 @@ def random_paths(draw):
 @settings(max_examples=120, deadline=None)
 @given(random_paths())
 def test_insertion_gains_match_brute_force(case):
-    """The vectorised (3.11) equals the best feasible insertion found by replaying every slot (cbba §8.3)."""
+    """The vectorised (3.11) equals the best feasible insertion found by replaying every slot."""
     s, path, options, marginal = case
     m = ScoringModel(s, marginal_gain=marginal, **options)
     sch = m.schedule(0, path)
@@ -212,7 +212,7 @@ def test_insertion_gains_match_brute_force(case):
 @settings(max_examples=80, deadline=None)
 @given(random_paths(), st.data())
 def test_frozen_from_start_gains_are_dmg(case, data):
-    """spec cbba_acbba §8.1–8.2: with frozen times and the start-distance cost, inserting another task m never
+    """DMG (Johnson (3.13)): with frozen times and the start-distance cost, inserting another task m never
     raises the gain of j, and never moves an existing start time."""
     s, path, options, _ = case
     options = dict(options, distance_cost="from_start")
@@ -232,7 +232,7 @@ def test_frozen_from_start_gains_are_dmg(case, data):
             assert gain_after[j] <= gain[j] + 1e-9, f"gain of {j} rose after inserting {extra}"
 
 
-# -- team score (spec cbga §1.7, §8.22) -------------------------------------------------------------------------------
+# -- team score (thesis §5.3.1, (3.4)) --------------------------------------------------------------------------------
 def _score(s, paths, **kw):
     policy = kw.pop("conflict_policy", "first_L_paid")
     m = ScoringModel(s, **kw)
@@ -240,7 +240,7 @@ def _score(s, paths, **kw):
 
 
 def test_incomplete_group_earns_nothing_but_pays_travel():
-    """L_j = 2 with one member: no reward, travel still costs; an empty path contributes 0 (§8.22)."""
+    """L_j = 2 with one member: no reward, travel still costs; an empty path contributes 0 (thesis §3.1.2)."""
     s = build([agent(0), agent(0, 3)], [task(4, reward=100, start=10, agents=2)], distance_discount=1.0)
     ts = _score(s, [[0], []], distance_cost="from_start")
     assert not ts.valid[0]
@@ -249,7 +249,7 @@ def test_incomplete_group_earns_nothing_but_pays_travel():
 
 
 def test_complete_group_pays_every_member():
-    """Every member of a valid L-agent task gets the full c̄_j (spec cbga §1.3)."""
+    """Every member of a valid L-agent task gets the full c̄_j (thesis §3.2.2, §5.3.2: a 4-agent task scores 400)."""
     s = build([agent(0), agent(0, 3)], [task(4, reward=100, start=10, agents=2)], distance_discount=1.0)
     ts = _score(s, [[0], [0]], distance_cost="from_start")
     assert ts.valid[0]
@@ -311,7 +311,7 @@ def test_prerequisites_must_be_valid_transitively():
 
 
 def test_team_score_matches_reference_on_generated_scenarios():
-    """The vectorised team score equals the loop reference of spec cbga §1.7 on random paths with conflicts."""
+    """The vectorised team score equals the loop reference (``helpers.reference_team_score``) with conflicts."""
     rng = np.random.default_rng(7)
     for seed in range(30):
         cfg = resolve_config({"n_agents": 4, "n_tasks": 6, "start_time_range": (0.0, 30.0), "agent_types": ["A", "B"],

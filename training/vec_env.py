@@ -3,7 +3,9 @@
 Every learned agent of every env copy is one slot of the vector env: slot ``c * K + k`` is the k-th learned agent
 (in ``possible_agents`` order) of copy c, with K learned agents per copy. One policy therefore acts for all of
 them (parameter sharing, as SuperSuit's ``pettingzoo_env_to_vec_env_v1``), but this adapter also provides what
-SuperSuit's converter lacks with SB3 2.9 (``/work/shared/notes/ecosystem.md`` §4.2–4.3):
+SuperSuit's converter lacks with SB3 2.9 (SuperSuit 3.11's ``ConcatVecEnv`` has no ``seed``, ``has_attr`` or
+``env_method``, and never sets ``TimeLimit.truncated``; sb3-contrib's ``MaskablePPO`` reads masks through
+``env_method("action_masks")``):
 
 * ``seed(seed)``: copy c is reset with ``seed + c`` at the next ``reset()``; later episodes continue each copy's
   generator, so a seeded run replays exactly;
