@@ -17,8 +17,9 @@ from taskalloc_env.scenario import Agent, Scenario, Task, generate
 
 ENV_ID = "taskalloc/TaskAlloc-v0"
 
-pettingzoo.register("parallel", ENV_ID, entry_point="taskalloc_env.taskalloc_v0:parallel_env")
-pettingzoo.register("aec", ENV_ID, entry_point="taskalloc_env.taskalloc_v0:env")
+if hasattr(pettingzoo, "register"):        # PettingZoo >= 1.27 has a registry; on older releases (AgileRL pins < 1.27)
+    pettingzoo.register("parallel", ENV_ID, entry_point="taskalloc_env.taskalloc_v0:parallel_env")   # use
+    pettingzoo.register("aec", ENV_ID, entry_point="taskalloc_env.taskalloc_v0:env")                 # taskalloc_v0
 
 __all__ = [
     "ENV_ID",

@@ -70,7 +70,7 @@ class TaskAllocEnv(ParallelEnv):
     def __init__(self, scenario: str | Path | TaskAllocConfig | Mapping[str, Any] | Scenario = "default",
                  max_cycles: int | None = None, render_mode: str | None = None, invalid_action: str = "noop",
                  reward_scale: float = 1.0, render_path: str | Path | None = None, dtype: str = "float32",
-                 memory_limit_gb: float | None = None, **overrides: Any) -> None:
+                 memory_limit_gb: float | None = None, mask_in_infos: bool = False, **overrides: Any) -> None:
         if isinstance(scenario, Scenario):
             self.fixed_scenario: Scenario | None = scenario
             self.config = scenario_config(scenario, **overrides)
@@ -84,6 +84,8 @@ class TaskAllocEnv(ParallelEnv):
         if dtype not in DTYPES:
             raise ConfigError(f"dtype {dtype!r} is not one of {DTYPES}")
         self.dtype = np.dtype(dtype)
+        self.mask_in_infos = bool(mask_in_infos)
+        self.invalid_action_reasons: dict[str, str] = {}     # why each flagged action of the last step was refused
         if max_cycles is not None and (isinstance(max_cycles, bool) or not isinstance(max_cycles, int)
                                        or max_cycles < 1):
             raise ConfigError(f"max_cycles must be a positive integer or None, got {max_cycles!r}")
@@ -182,6 +184,7 @@ class TaskAllocEnv(ParallelEnv):
         flags: dict[str, str] = {}
         decisions = self._read_actions(actions, flags)
         protocol.counters.invalid_actions += len(flags)
+        self.invalid_action_reasons = flags
         view = protocol.view()
         for i, action in decisions:
             m = self.config.n_tasks
@@ -294,9 +297,9 @@ class TaskAllocEnv(ParallelEnv):
         for a in self.agents:
             info = dict(figures)
             info["passed"] = bool(self._passed[self.agent_index[a]])
-            info["action_mask"] = self._masks[self.agent_index[a]].copy()
-            if a in flags:
-                info["invalid_action"] = flags[a]
+            info["invalid_action"] = a in flags          # the reason: env.unwrapped.invalid_action_reasons[a]
+            if self.mask_in_infos:
+                info["action_mask"] = self._masks[self.agent_index[a]].copy()
             infos[a] = info
         return infos
 
