@@ -251,6 +251,17 @@ class TaskAllocEnv(ParallelEnv):
             decisions.append((i, action))
         return decisions
 
+    def validate_action(self, agent: str, action: Any) -> int:
+        """``action`` as an int if ``agent`` may take it now; otherwise ``InvalidActionError`` saying why."""
+        if self._protocol is None:
+            raise InvalidActionError("no episode: call reset() first")
+        if agent not in self.agents:
+            raise InvalidActionError(f"unknown or finished agent {agent!r}; live agents: {self.agents}")
+        checked, problem = self._check_action(agent, action, self._masks[self.agent_index[agent]])
+        if problem:
+            raise InvalidActionError(problem)
+        return checked
+
     def _check_action(self, agent: str, raw: Any, mask: np.ndarray) -> tuple[int | None, str | None]:
         value = raw.item() if isinstance(raw, np.ndarray) and raw.size == 1 else raw   # a 0-d or 1-element array
         try:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from pettingzoo.utils import wrappers
-from pettingzoo.utils.conversions import parallel_to_aec
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 
 from taskalloc_env.env import TaskAllocEnv
 
@@ -17,9 +17,22 @@ def parallel_env(**kwargs: Any) -> TaskAllocEnv:
     return TaskAllocEnv(**kwargs)
 
 
+class _AECView(parallel_to_aec_wrapper):
+    """PettingZoo's AEC view of the parallel env, which with ``invalid_action="raise"`` checks each action when it is
+    given: the parallel env sees a turn's actions only after the last agent has chosen, too late to name the culprit.
+    """
+
+    def step(self, action: Any) -> None:
+        agent = self.agent_selection
+        env = self.env.unwrapped
+        if env.invalid_action == "raise" and not (self.terminations.get(agent) or self.truncations.get(agent)):
+            env.validate_action(agent, action)
+        super().step(action)
+
+
 def raw_env(**kwargs: Any):
     """The AEC view of the parallel environment."""
-    return parallel_to_aec(parallel_env(**kwargs))
+    return _AECView(parallel_env(**kwargs))
 
 
 def env(**kwargs: Any):

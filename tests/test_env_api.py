@@ -356,3 +356,16 @@ def test_render_modes_return_types():
     e.reset(seed=0)
     with pytest.raises(ValueError, match="render_mode"):
         e.render()
+
+
+def test_the_aec_view_refuses_a_bad_action_when_it_is_given():
+    """Under ``raise`` the AEC view names the agent at its own turn, not when the last agent of the turn acts."""
+    env = taskalloc_v0.env(n_agents=3, n_tasks=4, invalid_action="raise")
+    env.reset(seed=0)
+    first = env.agent_selection
+    with pytest.raises(InvalidActionError, match=first):
+        env.step(1 + 4)                        # a quit; task quitting is off
+    lenient = taskalloc_v0.env(n_agents=3, n_tasks=4)
+    lenient.reset(seed=0)
+    lenient.step(1 + 4)                        # noop: accepted now, turned into a flagged pass with the turn
+    assert lenient.agent_selection != first
