@@ -1,0 +1,202 @@
+"""Fuzzing: random scenarios across every option, every policy, and the invariants that must hold on each episode.
+
+    python -m evaluation.fuzz                      # 300 episodes (about a minute), seed 0
+    python -m evaluation.fuzz --episodes 20000 --seed 7 --jobs 2
+
+Each episode draws a config (sizes, L_j, equipment mixes, prerequisite chains, communication range, every named
+scoring and protocol option), a policy (random, CBGA and its variants, CBBA where every L_j = 1) and a seed, runs it
+and checks:
+
+* ``spaces``: every observation lies in its space, every mask is binary int8 with pass allowed, every action the
+  policy takes is allowed;
+* ``return``: the episode return × reward_scale equals ``evaluate().score``;
+* ``converged``: the episode ends by convergence, not by the round bound, when links are perfect;
+* ``agreement`` and ``conflict-free``: at convergence on a connected network every agent holds the same table and no
+  task has more than L_j members (thesis §3.2: the consensus reaches a conflict-free allocation);
+* ``valid groups``: every valid task has exactly L_j members whose equipment covers it, and its prerequisites are
+  valid;
+* ``determinism``: the same (config, policy, seed) run again gives byte-identical observations, rewards and infos.
+
+The counts per check are printed; any failure prints its reproducer (the config mapping, the policy and the seed) and
+the command exits with status 1. ``tests/test_fuzz.py`` runs a fixed budget in CI.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import sys
+from collections import Counter
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any
+
+import numpy as np
+
+from evaluation.episodes import default_jobs
+from policies import make_policy
+from taskalloc_env import TaskAllocEnv
+from taskalloc_env.errors import run_cli
+
+CHECKS = ("spaces", "return", "converged", "agreement", "conflict-free", "valid groups", "determinism")
+POLICIES = ("random", "cbga", "cbga+tb", "cbga+tq", "cbgabi")
+
+
+def draw_config(rng: np.random.Generator) -> dict[str, Any]:
+    """A random config over every option (small sizes, so that thousands of episodes run in minutes)."""
+    n_agents, n_tasks = int(rng.integers(2, 8)), int(rng.integers(2, 10))
+    kw: dict[str, Any] = {"n_agents": n_agents, "n_tasks": n_tasks,
+                          "start_time_range": [0.0, float(rng.choice([10.0, 30.0, 60.0]))],
+                          "window": float(rng.choice([2.0, 5.0, 10.0])), "duration": float(rng.choice([0.0, 5.0]))}
+    kind = rng.choice(["plain", "plain", "equipment", "prerequisites"])
+    if kind == "equipment":
+        kw["agent_types"] = ["A", "B"]
+        first = int(rng.integers(0, n_tasks + 1))
+        second = int(rng.integers(0, n_tasks - first + 1))
+        kw["task_mix"] = [{"count": first, "equipment": list(rng.choice(["A", "B", "AB", "AA"]))},
+                          {"count": second, "equipment": list(rng.choice(["AB", "BB"]))},
+                          {"count": n_tasks - first - second, "agents": int(rng.integers(1, 3))}]
+    else:
+        choices = [1, 2, 3, [1, 2], [1, 2, 3], [2, 3]]
+        kw["agents_per_task"] = choices[int(rng.integers(len(choices)))]
+        kw["agents_per_task"] = [v for v in np.atleast_1d(kw["agents_per_task"]).tolist() if v <= n_agents] or 1
+        if kind == "prerequisites":
+            length = int(rng.integers(2, min(3, n_tasks) + 1))
+            kw["prerequisites"] = {"chains": int(rng.integers(1, max(1, n_tasks // length) + 1)), "length": length,
+                                   "followup_window": bool(rng.integers(2))}
+            kw["prereq_mode"] = str(rng.choice(["all_have_bid", "all_complete", "any_has_bid"]))
+            kw["prereq_timing"] = str(rng.choice(["conservative", "earliest", "none"]))
+    if rng.random() < 0.3:
+        kw["comm_range"] = float(rng.uniform(0.5, 4.0))
+        kw["require_known_capacity"] = bool(rng.integers(2))
+    for field, values in (("marginal_gain", ["rescore", "frozen"]), ("reward_split", ["per_agent", "total"]),
+                          ("release_order", ["bundle", "path"]), ("cbba_table", ["canonical", "thesis"]),
+                          ("consensus", ["sync", "every_step"]), ("reset_on", ["additions", "any_change"]),
+                          ("quit_block", ["none", "until_change"]), ("conflict_policy", ["first_L_paid", "none_paid"]),
+                          ("distance_cost", ["from_start", "leg"])):
+        kw[field] = str(rng.choice(values))
+    if rng.random() < 0.3:
+        kw["max_bundle"] = int(rng.integers(1, 4))
+    return kw
+
+
+def run_case(case: tuple[dict[str, Any], str, int]) -> dict[str, Any]:
+    """Run one (config, policy, seed); returns the verdict of every check (True, False, or None: not applicable)."""
+    kw, name, seed = case
+    policy = make_policy(name)
+    verdict: dict[str, Any] = {"case": case}
+    first = _episode(kw, policy, seed, verdict)
+    second = _episode(kw, make_policy(name), seed, None)
+    verdict["determinism"] = first == second
+    return verdict
+
+
+def _episode(kw: dict[str, Any], policy: Any, seed: int, verdict: dict[str, Any] | None) -> str:
+    env = TaskAllocEnv(**kw, reward_scale=10.0, invalid_action="raise", **policy.env_overrides)
+    digest = hashlib.sha256()
+    obs, infos = env.reset(seed=seed)
+    policy.start(env, seed)
+    space = env.observation_space(env.possible_agents[0])
+    spaces_ok, total = True, 0.0
+    while env.agents:
+        for o in obs.values():
+            mask = o["action_mask"]
+            binary = set(np.unique(mask).tolist()) <= {0, 1}
+            spaces_ok &= space.contains(o) and mask.dtype == np.int8 and bool(mask[0]) and binary
+            digest.update(o["observation"].tobytes() + mask.tobytes())
+        actions = policy.act(obs, infos)
+        spaces_ok &= all(obs[a]["action_mask"][act] == 1 for a, act in actions.items())
+        obs, rewards, _, _, infos = env.step(actions)
+        total += sum(rewards.values()) / max(1, len(rewards))
+        digest.update(json.dumps([rewards, infos], sort_keys=True, default=str).encode())
+    if verdict is not None:
+        allocation = env.evaluate()
+        protocol = env.protocol
+        connected = bool((protocol.graph.component == 0).all())
+        verdict.update({"spaces": spaces_ok, "return": abs(total * env.reward_scale - allocation.score) < 1e-6,
+                        "converged": allocation.converged})
+        at_rest = allocation.converged and connected
+        verdict["agreement"] = allocation.agreement if at_rest else None
+        verdict["conflict-free"] = not allocation.conflicts if at_rest else None
+        verdict["valid groups"] = _valid_groups(env, allocation)
+    return digest.hexdigest()
+
+
+def _valid_groups(env: TaskAllocEnv, allocation: Any) -> bool:
+    """Valid tasks have L_j members covering te_j (a conflict under ``first_L_paid`` pays its first L_j starters,
+    whose equipment ``team_score`` checked) and valid prerequisites."""
+    s = env.scenario
+    valid = set(allocation.valid_tasks)
+    for j in valid:
+        members = allocation.members[j]
+        if j in allocation.conflicts:
+            if env.config.conflict_policy != "first_L_paid" or len(members) <= s.task_agents[j]:
+                return False
+            continue
+        if len(members) != s.task_agents[j]:
+            return False
+        if np.any(s.agent_equipment[list(members)].sum(axis=0) < s.task_equipment[j]):
+            return False
+        if any(p not in valid for p in np.flatnonzero(s.task_prereqs[j])):
+            return False
+    return True
+
+
+def cases(episodes: int, seed: int) -> list[tuple[dict[str, Any], str, int]]:
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(episodes):
+        kw = draw_config(rng)
+        single = kw.get("task_mix") is None and max(np.atleast_1d(kw["agents_per_task"])) == 1
+        names = (*POLICIES, "cbba") if single else POLICIES
+        out.append((kw, str(rng.choice(names)), int(rng.integers(2**31))))
+    return out
+
+
+def fuzz(episodes: int, seed: int, jobs: int = 1) -> tuple[Counter, list[dict[str, Any]]]:
+    """Run the fuzz; returns per-check counts (``check: passed`` / ``check: failed``) and the failing verdicts."""
+    todo = cases(episodes, seed)
+    if jobs > 1:
+        with ProcessPoolExecutor(jobs) as pool:
+            verdicts = list(pool.map(run_case, todo, chunksize=8))
+    else:
+        verdicts = [run_case(c) for c in todo]
+    counts: Counter = Counter()
+    failures = []
+    for v in verdicts:
+        failed = False
+        for check in CHECKS:
+            if v[check] is None:
+                counts[f"{check}: not applicable"] += 1
+            elif v[check]:
+                counts[f"{check}: passed"] += 1
+            else:
+                counts[f"{check}: failed"] += 1
+                failed = True
+        if failed:
+            failures.append(v)
+    return counts, failures
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m evaluation.fuzz", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--episodes", type=int, default=300, help="random episodes to run (default 300)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the draw of configs, policies and seeds")
+    parser.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes (default: every core)")
+    args = parser.parse_args(argv)
+    counts, failures = fuzz(args.episodes, args.seed, args.jobs)
+    print(f"{args.episodes} episodes (seed {args.seed}):")
+    for check in CHECKS:
+        parts = [f"{counts[f'{check}: {k}']} {k}" for k in ("passed", "failed", "not applicable")
+                 if counts[f"{check}: {k}"]]
+        print(f"  {check:<14} {', '.join(parts)}")
+    for v in failures[:10]:
+        kw, name, seed = v["case"]
+        bad = [c for c in CHECKS if v[c] is False]
+        print(f"FAILED {bad}: policy {name}, seed {seed}, config {json.dumps(kw)}", file=sys.stderr)
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(run_cli(main))
