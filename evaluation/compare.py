@@ -40,8 +40,8 @@ from taskalloc_env.errors import ConfigError
 
 BASELINES = ("random", "cbba", "cbga", "cbga+tq", "cbga+tb", "cbgabi", "sgama")
 REFERENCE = "CBGA"
-COLUMNS = (("score", "score"), ("valid_tasks", "valid tasks"), ("rounds", "rounds"), ("messages", "messages"),
-           ("comm_steps", "msgs / agent"))
+COLUMNS = (("score", "score"), ("valid_tasks", "valid tasks"), ("rounds", "rounds"),
+           ("comm_steps_to_agreement", "msgs / agent to agreement"), ("comm_steps", "msgs / agent to the end"))
 
 
 def learned_checkpoints() -> list[str]:
@@ -127,11 +127,12 @@ def compare(scenario: str, episodes: int, overrides: dict[str, Any], jobs: int =
     table, records = summary(rows, [names[s] for s in solvers])
     setting = (f"Scenario `{scenario}`{''.join(f', {k}={v}' for k, v in overrides.items())}: {cfg.n_agents} agents, "
                f"{cfg.n_tasks} tasks, L_j = {_agents_text(cfg)}; {episodes} paired seeds (0–{episodes - 1}).")
-    legend = ("score = rewards of valid tasks − travel cost (thesis §5.3.1); messages = messages received in total "
-              "(one per sender → receiver per round); msgs / agent = messages / N_n, the thesis's communication steps; "
-              "not conv. = episodes that hit the round bound (kept in the means); SGAMA is centralised (no rounds or "
-              f"messages). Δ, p (paired t-test) and beats (share of seeds with a higher score) are against "
-              f"{REFERENCE} on the same seeds.")
+    legend = ("score = rewards of valid tasks − travel cost (thesis §5.3.1); msgs / agent = messages received "
+              "(one per sender → receiver per round) / N_n, the thesis's communication steps, counted until the last "
+              "change (to agreement: every agent then holds the final solution, the thesis's stop) and until the "
+              "episode ends (D + 1 quiet rounds later); not conv. = episodes that hit the round bound (kept in the "
+              "means); SGAMA is centralised (no rounds or messages). Δ, p (paired t-test) and beats (share of seeds "
+              f"with a higher score) are against {REFERENCE} on the same seeds.")
     text = "\n".join([setting, "", table, legend, *(f"- {n}" for n in notes)]) + "\n"
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)

@@ -1,42 +1,80 @@
-"""How often greedy CBBA/CBGA converges under each travel-cost option (the evidence behind ``distance_cost``).
+"""How often greedy CBGA converges under each travel-cost and bid option (the evidence behind the defaults).
 
-    python -m evaluation.convergence [--seeds 50] [--max-rounds 100]
+    python -m evaluation.convergence                                 # the defaults' rows, 1000 seeds each
+    python -m evaluation.convergence --seeds 200 --all --out docs/convergence.md
 
 CBBA's convergence and conflict-freedom rest on diminishing marginal gains (DMG, Johnson §3.4.1 eq. (3.13);
-thesis eq. (2.5)). The ``leg``
-cost (γ × the detour an insertion adds) is not DMG: inserting a task next to j can shrink j's detour and raise its
-bid, so bids can cycle. ``from_start`` (γ × the straight distance from the agent's start, the fuel penalty of the
-public MIT CBBA Matlab code; the thesis says only that its Matlab implementation extends a CBBA implementation,
-§3.3.1) keeps DMG. The table shows the share of
-runs that converge within ``--max-rounds`` rounds on the thesis's test scenario (§3.3.2; 10 agents, 20 tasks).
+thesis eq. (2.5)). The per-leg cost of thesis (3.9) (``distance_cost="leg"``: γ × the detour an insertion adds) is
+not DMG, and neither are re-timed gains (``marginal_gain="rescore"``, (3.11)): inserting a task can raise the value
+of another, and greedy bids can cycle. Warped bids (``bid_warping``: the shared bid is min(c_ij, the agent's earlier
+bundle bids), so shared bids follow DMG — Johnson §4.3: "as long as external bids follow DMG") restore
+convergence. Each row runs a policy on the thesis's test scenario (§3.3.2; 10 agents, 20 tasks) at one L_j and
+reports the share of seeds that converge before the round bound, the rounds they took, and the mean score.
 """
 
 from __future__ import annotations
 
 import argparse
 import itertools
+from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
-from policies import make_policy, rollout
-from taskalloc_env import TaskAllocEnv
-from taskalloc_env.errors import run_cli
+from evaluation.episodes import Episode, default_jobs, run_episodes
+from evaluation.report import markdown_table
+from taskalloc_env import resolve_config
+from taskalloc_env.errors import ConfigError, run_cli
+
+DEFAULT_ROWS = [("leg", gain, True) for gain in ("rescore", "frozen")]
+ALL_ROWS = [(cost, gain, warp) for cost, gain, warp in itertools.product(("leg", "from_start"), ("rescore", "frozen"),
+                                                                          (True, False))]
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seeds", type=int, default=50)
-    parser.add_argument("--max-rounds", type=int, default=100)
+def table(rows: Sequence[tuple[str, str, bool]], policies: Sequence[str], levels: Sequence[int], seeds: int,
+          jobs: int, progress: bool = True) -> str:
+    """The markdown table: one line per (policy, distance_cost, marginal_gain, bid_warping, L_j)."""
+    cells = {}
+    episodes = []
+    for policy, (cost, gain, warp), level in itertools.product(policies, rows, levels):
+        cfg = resolve_config("default", distance_cost=cost, marginal_gain=gain, bid_warping=warp,
+                             agents_per_task=level)
+        key = (policy, cost, gain, warp, level)
+        cells[key] = []
+        episodes += [Episode(policy, cfg, seed, (("cell", key),)) for seed in range(seeds)]
+    for row in run_episodes(episodes, jobs=jobs, progress=progress, desc="convergence"):
+        cells[row["cell"]].append(row)
+    body = []
+    for (policy, cost, gain, warp, level), rows_ in cells.items():
+        done = [r for r in rows_ if r["converged"]]
+        rounds = f"{np.mean([r['rounds'] for r in done]):.1f}" if done else "–"
+        body.append([policy, cost, gain, "yes" if warp else "no", level, f"{len(done)}/{len(rows_)}", rounds,
+                     f"{np.mean([r['score'] for r in rows_]):.1f}"])
+    header = ["policy", "distance_cost", "marginal_gain", "bid_warping", "L_j", "converged", "rounds (converged)",
+              "score (mean)"]
+    return markdown_table(header, body)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m evaluation.convergence", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, default=1000, help="seeds per row (default 1000)")
+    parser.add_argument("--all", action="store_true",
+                        help="every combination of distance_cost, marginal_gain and bid_warping (default: the "
+                             "defaults' leg + warping under both marginal-gain modes)")
+    parser.add_argument("--policies", default="cbga,cbgabi", help="comma-separated policies (default cbga,cbgabi)")
+    parser.add_argument("--levels", default="1,2,4", help="comma-separated L_j values (default 1,2,4)")
+    parser.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes (default: every core)")
+    parser.add_argument("--out", type=Path, help="also write the table (with its command) to this markdown file")
     args = parser.parse_args(argv)
-    policy = make_policy("cbga")
-    print(f"{'distance_cost':14s} {'marginal_gain':14s} {'L_j':>4s} {'converged':>10s} {'rounds (conv.)':>15s}")
-    for cost, gain, agents in itertools.product(("from_start", "leg"), ("rescore", "frozen"), (1, 2, 4)):
-        env = TaskAllocEnv(distance_cost=cost, marginal_gain=gain, agents_per_task=agents,
-                           max_rounds=args.max_rounds)
-        runs = [rollout(env, policy, seed=s) for s in range(args.seeds)]
-        done = [r for r in runs if r.converged]
-        rounds = f"{np.mean([r.counters.rounds for r in done]):.1f}" if done else "-"
-        print(f"{cost:14s} {gain:14s} {agents:4d} {len(done):5d}/{args.seeds:<4d} {rounds:>15s}")
+    if args.seeds < 1:
+        raise ConfigError(f"--seeds: got {args.seeds}; allowed: an integer >= 1")
+    levels = [int(v) for v in args.levels.split(",")]
+    text = table(ALL_ROWS if args.all else DEFAULT_ROWS, args.policies.split(","), levels, args.seeds, args.jobs)
+    print(text)
+    if args.out:
+        command = "python -m evaluation.convergence " + " ".join(argv if argv is not None else [])
+        args.out.write_text(f"<!-- written by `{command.strip()}` -->\n{text}")
+    return 0
 
 
 if __name__ == "__main__":

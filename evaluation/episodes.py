@@ -9,7 +9,10 @@ get an environment built with them; those options do not touch the instance gene
 
 Communication steps (thesis §3.3.2: one message from i received by k is one step): ``messages`` counts every
 message received (one per sender → receiver pair per round); ``comm_steps`` = messages / N_n, the per-agent count
-(our reading) whose magnitudes match the thesis's Fig 3.11.
+until the episode ends (D + 1 quiet rounds after the last change; the per-agent count, our reading, whose magnitudes
+match the thesis's Fig 3.11), ``comm_steps_to_agreement`` the same count until the last change, after which every
+agent holds the final solution (the thesis's stop, "when all agents converge to the same conflict-free solution",
+§3.2.3).
 Centralised solvers have no rounds or messages (left empty). Episodes that hit the round bound are kept and
 flagged ``converged = False``.
 """
@@ -37,11 +40,13 @@ from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import max_required_agents
 
 CENTRALISED = {"sgama": ("SGAMA", sgama), "exact": ("exact", exact)}
-METRICS = ("score", "valid_tasks", "conflicts", "rounds", "messages", "comm_steps", "informative_messages",
+METRICS = ("score", "valid_tasks", "conflicts", "rounds", "messages", "comm_steps", "rounds_to_agreement",
+           "comm_steps_to_agreement", "invalid_actions", "informative_messages",
            "data_items", "bids", "quits")
 SUMMARY_FIELDS = ("score", "valid_tasks", "rounds", "messages")
 MAX_CHUNK = 16
-PROTOCOL_METRICS = ("rounds", "messages", "comm_steps", "informative_messages", "data_items", "quits")
+PROTOCOL_METRICS = ("rounds", "messages", "comm_steps", "rounds_to_agreement", "comm_steps_to_agreement",
+                    "invalid_actions", "informative_messages", "data_items", "quits")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -130,6 +135,7 @@ def run_episode(episode: Episode) -> dict[str, Any]:
     figures = allocation.summary()
     n_agents = episode.config.n_agents
     figures["comm_steps"] = figures["messages"] / n_agents
+    figures["comm_steps_to_agreement"] = figures["messages_to_agreement"] / n_agents
     if key in CENTRALISED:
         figures.update(dict.fromkeys(PROTOCOL_METRICS))
     return {**dict(episode.labels), "solver": solver_name(episode.solver), "seed": episode.seed,

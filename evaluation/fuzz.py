@@ -73,7 +73,7 @@ def draw_config(rng: np.random.Generator) -> dict[str, Any]:
     for field, values in (("marginal_gain", ["rescore", "frozen"]), ("reward_split", ["per_agent", "total"]),
                           ("release_order", ["bundle", "path"]), ("cbba_table", ["canonical", "thesis"]),
                           ("consensus", ["sync", "every_step"]), ("reset_on", ["additions", "any_change"]),
-                          ("quit_block", ["none", "until_change"]), ("conflict_policy", ["first_L_paid", "none_paid"]),
+                          ("quit_block", ["until_joined", "none"]), ("conflict_policy", ["first_L_paid", "none_paid"]),
                           ("distance_cost", ["from_start", "leg"])):
         kw[field] = str(rng.choice(values))
     if rng.random() < 0.3:

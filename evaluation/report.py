@@ -24,10 +24,12 @@ from evaluation.stats import PairedComparison, format_mean_sd, format_p, paired
 METRIC_LABELS = {
     "score": "score", "valid_tasks": "valid tasks", "conflicts": "conflicts", "rounds": "rounds",
     "messages": "messages", "comm_steps": "comm steps / agent", "informative_messages": "informative msgs",
-    "data_items": "data items", "bids": "bids", "quits": "quits",
+    "data_items": "data items", "bids": "bids", "quits": "quits", "rounds_to_agreement": "rounds to agreement",
+    "comm_steps_to_agreement": "comm steps / agent to agreement", "invalid_actions": "invalid actions",
 }
 METRIC_DIGITS = {"score": 0, "valid_tasks": 1, "conflicts": 1, "rounds": 1, "messages": 0, "comm_steps": 1,
-                 "informative_messages": 0, "data_items": 0, "bids": 0, "quits": 1}
+                 "informative_messages": 0, "data_items": 0, "bids": 0, "quits": 1, "rounds_to_agreement": 1,
+                 "comm_steps_to_agreement": 1, "invalid_actions": 1}
 
 
 def values(rows: Iterable[Mapping[str, Any]], metric: str) -> np.ndarray:

@@ -8,7 +8,9 @@ Each iteration assigns the one (agent, task) pair with the largest c_ij + Σ_n x
 bids already on the task), among pairs that are eligible (equipment, prerequisites per ``prereq_mode``, a feasible
 insertion with c_ij > 0) and where the group has room that the agent's equipment fills. The winner inserts the task
 at its best slot and records its bid, the step Alg 7 leaves out. With every L_j = 1 this is SGA (Johnson §3.3.1).
-Ties go to the lowest agent id, then the lowest task id (Alg 7 scans agents, then tasks, with a strict ">").
+Ties go to the highest agent id, then the lowest task id: the (bid, agent id) order of CBBA and CBGA (thesis §3.2.3,
+Appendix A.1) and the scripted policies' task order, one rule everywhere, so that CBBA = SGA also holds with ties
+(Alg 7 as printed scans agents, then tasks, with a strict ">", which would give ties to the lowest agent id).
 
 ``exact``: the optimum of the team score (``scoring.team_score``) for small instances, at most ``MAX_AGENTS`` = 6 agents
 and ``MAX_TASKS`` = 9 tasks. The time grows with how many tasks one agent can chain: on a 2-core machine, 4 × 8
@@ -60,7 +62,8 @@ def sgama(scenario: Scenario, cfg: TaskAllocConfig | None = None) -> Allocation:
         if not ok.any():
             break
         value = np.where(ok, gains + x.sum(axis=0)[None, :], -np.inf)
-        i, j = np.unravel_index(int(np.argmax(value)), value.shape)     # row-major: lowest agent, then task
+        flat = int(np.argmax(value[::-1]))                              # ties: the highest agent, then the lowest task
+        i, j = n - 1 - flat // m, flat % m
         x[i, j] = gains[i, j]
         paths[i].insert(int(slots[i, j]), int(j))
         gains[i], slots[i] = model.insertion_gains(i, paths[i])

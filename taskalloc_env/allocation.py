@@ -24,6 +24,10 @@ class Counters:
     bids: int = 0
     quits: int = 0
     invalid_actions: int = 0    # actions outside the mask turned into passes (invalid_action="noop")
+    # the round after which no table or bundle changed again, and the messages sent until then: the thesis's stop
+    # "when all agents converge to the same conflict-free solution" (§3.2.3), before our D + 1 quiet rounds confirm it
+    rounds_to_agreement: int = 0
+    messages_to_agreement: int = 0
 
 
 @dataclasses.dataclass(frozen=True)

@@ -21,7 +21,7 @@ import numpy as np
 
 from taskalloc_env.cbba_table import NONE, outbids
 from taskalloc_env.groups import Equipment, admit
-from taskalloc_env.knowledge import NEVER, LocalKnowledge
+from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.scenario import Scenario
 
 
@@ -29,7 +29,8 @@ from taskalloc_env.scenario import Scenario
 class BidView:
     """Per (agent, task) arrays, all (N, M)."""
 
-    gain: np.ndarray            # c_ij (3.11)
+    gain: np.ndarray            # c_ij (3.11), the agent's own value of the task
+    bid: np.ndarray             # what a bid stores and shares: c_ij, or min(c_ij, earlier bundle bids) warped
     slot: np.ndarray            # n_ij, the best insertion slot
     outbid: np.ndarray          # h_ij
     eligible: np.ndarray        # every eligibility filter except the window (which ``gain`` > 0 encodes)
@@ -94,7 +95,7 @@ def known_capacity(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equ
 
 def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment, equipment_match: np.ndarray,
              gain: np.ndarray, slot: np.ndarray, *, prereq_mode: str, require_known_capacity: bool,
-             max_bundle: int, fillable: np.ndarray) -> BidView:
+             max_bundle: int, fillable: np.ndarray, bid_warping: bool = False, outbid_ties: str = "strict") -> BidView:
     """The bidding situation of every agent, computed from its local table only.
 
     ``fillable`` (M,) marks the tasks some team of the scenario can complete: every agent knows all agents'
@@ -107,7 +108,11 @@ def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment
     counts = np.zeros((n, m), dtype=np.int64)
     group_total = np.zeros((n, m))
     lowest_bid = np.zeros((n, m))
-    in_bundle = knowledge.own_bids() > 0
+    own = knowledge.own_bids()
+    in_bundle = own > 0
+    # warped bids (bid_warping): never above an earlier bid of the bundle, whose last bid is its lowest
+    bid = np.minimum(gain, np.where(in_bundle, own, np.inf).min(axis=1)[:, None]) if bid_warping else gain
+    strict = outbid_ties == "strict"
     outbid = np.zeros((n, m), dtype=bool)
     displaced = np.full((n, m), NONE, dtype=np.int64)
     displaced_bid = np.zeros((n, m))
@@ -119,7 +124,8 @@ def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment
         counts[:, single] = winner != NONE
         group_total[:, single] = held
         lowest_bid[:, single] = held
-        outbid[:, single] = (winner == NONE) | outbids(gain[:, single], agents[:, None], held, winner)
+        better = bid[:, single] > held if strict else outbids(bid[:, single], agents[:, None], held, winner)
+        outbid[:, single] = (winner == NONE) | better
         displaced[:, single] = winner
         displaced_bid[:, single] = held
     multi = ~single
@@ -130,7 +136,8 @@ def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment
         group_total[:, multi] = columns.sum(axis=1)
         lowest_bid[:, multi] = np.where(counts[:, multi] > 0, np.where(members, columns, np.inf).min(axis=1), 0.0)
         newcomer = np.broadcast_to(agents[:, None], (n, int(multi.sum())))
-        admission = admit(columns, newcomer, gain[:, multi], scenario.task_agents[multi], equipment.subset(multi))
+        admission = admit(columns, newcomer, bid[:, multi], scenario.task_agents[multi], equipment.subset(multi),
+                          strict=strict)
         outbid[:, multi] = admission.accepted
         displaced[:, multi] = admission.displaced
         displaced_bid[:, multi] = admission.displaced_bid
@@ -140,9 +147,9 @@ def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment
     eligible = equipment_match & prereqs_met & ~in_bundle & fillable[None, :]
     if require_known_capacity:
         eligible &= known_capacity(knowledge, scenario, equipment, equipment_match)
-    eligible &= knowledge.quit_members == NEVER
+    eligible &= ~knowledge.quit_blocked
     bundle_sizes = np.array([len(b) for b in knowledge.bundles])
     eligible &= (bundle_sizes < max_bundle)[:, None]
-    return BidView(gain=gain, slot=slot, outbid=outbid, eligible=eligible, equipment_match=equipment_match,
+    return BidView(gain=gain, bid=bid, slot=slot, outbid=outbid, eligible=eligible, equipment_match=equipment_match,
                    prereqs_met=prereqs_met, members=counts, group_total=group_total, lowest_bid=lowest_bid,
                    displaced=displaced, displaced_bid=displaced_bid, in_bundle=in_bundle)

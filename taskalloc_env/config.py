@@ -49,8 +49,10 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "cbba_table": ("canonical", "thesis"),
     "release_order": ("bundle", "path"),
     "reset_on": ("additions", "any_change"),
-    "quit_block": ("none", "until_change"),
+    "quit_block": ("until_joined", "none"),
     "consensus": ("sync", "every_step"),
+    "outbid_ties": ("strict", "higher_id"),
+    "reward_time": ("arrival", "start"),
 }
 
 
@@ -108,11 +110,12 @@ class TaskAllocConfig:
     comm_range: float | None = None
     edge_rule: str = "dist"
     # -- scoring (thesis §3.2.2, §5.3.1; docs/decisions.md) --
-    distance_cost: str = "from_start"
+    distance_cost: str = "leg"
     prereq_timing: str = "conservative"
     reward_split: str = "per_agent"
     conflict_policy: str = "first_L_paid"
     marginal_gain: str = "rescore"
+    reward_time: str = "arrival"
     # -- protocol (thesis §3.2, §4.2, §5.2; Johnson §3.4.1) --
     cbba_table: str = "canonical"
     prereq_mode: str = "all_have_bid"
@@ -121,8 +124,10 @@ class TaskAllocConfig:
     task_quitting: bool = False
     delta: int = 1
     reset_on: str = "additions"
-    quit_block: str = "none"
+    quit_block: str = "until_joined"
     consensus: str = "sync"
+    outbid_ties: str = "strict"
+    bid_warping: bool = True
     max_bundle: int | None = None
     max_rounds: int | None = None
 
@@ -152,7 +157,7 @@ _FIELDS = {f.name: f for f in dataclasses.fields(TaskAllocConfig)}
 GENERATION_FIELDS = ("n_agents", "n_tasks", "agents_per_task", "arena", "speed", "units", "reward", "time_discount",
                      "distance_discount", "window", "duration", "start_time_range", "agent_types", "agent_type_counts",
                      "task_mix", "prerequisites")
-SCORING_FIELDS = ("distance_cost", "prereq_timing", "reward_split", "conflict_policy", "marginal_gain")
+SCORING_FIELDS = ("distance_cost", "prereq_timing", "reward_split", "conflict_policy", "marginal_gain", "reward_time")
 PROTOCOL_FIELDS = tuple(name for name in _FIELDS if name not in GENERATION_FIELDS + SCORING_FIELDS)
 
 
@@ -208,7 +213,7 @@ def _validate(cfg: TaskAllocConfig) -> None:
         _check_positive_int("max_bundle", cfg.max_bundle)
     if cfg.max_rounds is not None:
         _check_positive_int("max_rounds", cfg.max_rounds)
-    for name in ("require_known_capacity", "task_quitting"):
+    for name in ("require_known_capacity", "task_quitting", "bid_warping"):
         if not isinstance(getattr(cfg, name), bool):
             _fail(name, getattr(cfg, name), "true | false")
     _check_positive_int("delta", cfg.delta, minimum=0)

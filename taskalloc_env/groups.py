@@ -83,10 +83,12 @@ class Admission:
 
 
 def admit(columns: np.ndarray, newcomer: np.ndarray, bid: np.ndarray, required_agents: np.ndarray,
-          equipment: Equipment) -> Admission:
+          equipment: Equipment, strict: bool = False) -> Admission:
     """Admission of ``newcomer`` (R, M) bidding ``bid`` (R, M) to the groups of ``columns`` (R, N, M) bids.
 
     ``required_agents`` is L_j (M,). The newcomer should not be a member already (callers exclude that case).
+    ``strict``: displacing needs a strictly higher bid (the bundle phase's ">" of Alg 5 l. 12/18, option
+    ``outbid_ties="strict"``); otherwise an equal bid from a higher id displaces too (the consensus order).
     """
     r_count, _, m = columns.shape
     members = columns > 0
@@ -94,5 +96,6 @@ def admit(columns: np.ndarray, newcomer: np.ndarray, bid: np.ndarray, required_a
     victims = equipment.replaceable(members, newcomer)
     lowest = np.argmin(np.where(victims, columns, np.inf), axis=1)                  # (bid, id)-lowest
     low_bid = columns[np.arange(r_count)[:, None], lowest, np.arange(m)[None, :]]
-    beats = ~room & victims.any(axis=1) & outbids(bid, newcomer, low_bid, lowest)
+    better = bid > low_bid if strict else outbids(bid, newcomer, low_bid, lowest)
+    beats = ~room & victims.any(axis=1) & better
     return Admission(room=room, displaced=np.where(beats, lowest, NONE), displaced_bid=np.where(beats, low_bid, 0.0))

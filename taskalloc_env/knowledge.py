@@ -33,7 +33,7 @@ class LocalKnowledge:
     paths: list[list[int]]      # p_i, execution order
     assigned_at: np.ndarray     # (N, M) H_i[j] (thesis §5.2.2, (5.6))
     quit: np.ndarray            # (N, M) Q_i[j] (thesis §5.2.2, Alg 9)
-    quit_members: np.ndarray    # (N, M) member count of column j right after i quit it (quit_block), or NEVER
+    quit_blocked: np.ndarray    # (N, M) i quit j and no other agent has joined j since (quit_block="until_joined")
     single: np.ndarray          # (M,) L_j == 1
 
     @classmethod
@@ -47,7 +47,7 @@ class LocalKnowledge:
             paths=[[] for _ in range(n_agents)],
             assigned_at=np.full((n_agents, n_tasks), NEVER, dtype=np.int64),
             quit=np.zeros((n_agents, n_tasks), dtype=bool),
-            quit_members=np.full((n_agents, n_tasks), NEVER, dtype=np.int64),
+            quit_blocked=np.zeros((n_agents, n_tasks), dtype=bool),
             single=single.copy(),
         )
 

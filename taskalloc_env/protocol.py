@@ -26,7 +26,7 @@ from taskalloc_env.cbba_table import NONE
 from taskalloc_env.config import TaskAllocConfig, round_bound
 from taskalloc_env.consensus import Traffic, exchange
 from taskalloc_env.errors import ConfigError
-from taskalloc_env.knowledge import NEVER, LocalKnowledge
+from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.network import CommGraph
 from taskalloc_env.scenario import Scenario
 from taskalloc_env.scoring import PathTable, Schedule, ScoringModel, TeamScore, team_score
@@ -138,7 +138,8 @@ class Protocol:
             self._view = bid_view(self.knowledge, self.scenario, self.equipment, self.equipment_match,
                                   self._gain.copy(), self._slot.copy(), prereq_mode=self.cfg.prereq_mode,
                                   require_known_capacity=self.cfg.require_known_capacity,
-                                  max_bundle=self.max_bundle, fillable=self.fillable)
+                                  max_bundle=self.max_bundle, fillable=self.fillable,
+                                  bid_warping=self.cfg.bid_warping, outbid_ties=self.cfg.outbid_ties)
         return self._view
 
     def score(self) -> TeamScore:
@@ -179,7 +180,7 @@ class Protocol:
         displaced = int(view.displaced[agent, task])
         if displaced != NONE:           # keep n_j ≤ L_j locally (our choice); Phase 2 propagates the eviction
             kn.set_bid(agent, displaced, task, 0.0)
-        value = float(view.gain[agent, task])
+        value = float(view.bid[agent, task])
         kn.add_to_bundle(agent, task, int(view.slot[agent, task]), value, self.round)
         self.counters.bids += 1
         self._touch(agent)
@@ -214,8 +215,7 @@ class Protocol:
         kn = self.knowledge
         released = kn.release(agent, task, self.cfg.release_order)
         kn.quit[agent, task] = True
-        if self.cfg.quit_block == "until_change":
-            kn.quit_members[agent, task] = int((kn.bids[agent, :, task] > 0).sum())
+        kn.quit_blocked[agent, task] = self.cfg.quit_block == "until_joined"
         self.counters.quits += 1
         self._touch(agent)
         return released
@@ -231,15 +231,17 @@ class Protocol:
         self._release_outbid()
         if self.cfg.task_quitting:
             self._reset_quit_timers(before)
-        if self.cfg.quit_block == "until_change":
-            blocked = kn.quit_members != NEVER
-            kn.quit_members[blocked & (kn.member_counts() != kn.quit_members)] = NEVER
+        if kn.quit_blocked.any():          # another agent assigned itself to a quit task: the quitter may return
+            joined = ((kn.bids > 0) & (before <= 0)).any(axis=1)
+            kn.quit_blocked &= ~joined
         c = self.counters
         c.rounds = self.round
         c.messages += traffic.messages
         c.informative_messages += traffic.informative
         c.data_items += traffic.data_items
         changed = not np.array_equal(kn.bids, self._last_bids) or kn.bundles != self._last_bundles
+        if changed:                         # the state from here on is final if nothing changes again
+            c.rounds_to_agreement, c.messages_to_agreement = self.round, c.messages
         self._last_bids = kn.bids.copy()
         self._last_bundles = [list(b) for b in kn.bundles]
         self.stable_rounds = 0 if changed or self._quit_pending() else self.stable_rounds + 1

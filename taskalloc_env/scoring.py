@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -56,11 +57,13 @@ class ScoringModel:
 
     def __init__(self, scenario: Scenario, *, distance_cost: str = TaskAllocConfig.distance_cost,
                  prereq_timing: str = TaskAllocConfig.prereq_timing, reward_split: str = TaskAllocConfig.reward_split,
-                 marginal_gain: str = TaskAllocConfig.marginal_gain) -> None:
+                 marginal_gain: str = TaskAllocConfig.marginal_gain,
+                 reward_time: str = TaskAllocConfig.reward_time) -> None:
         """Scoring options default to the config's defaults (``TaskAllocConfig``), their one home."""
         self.scenario = scenario
         self.distance_cost = distance_cost
         self.marginal_gain = marginal_gain
+        self.reward_time = reward_time
         s = scenario
         self.lam = s.time_discount
         self.gamma = s.distance_discount
@@ -88,7 +91,7 @@ class ScoringModel:
     def from_config(cls, scenario: Scenario, cfg: TaskAllocConfig) -> ScoringModel:
         """The scoring model of ``scenario`` under the scoring options of ``cfg`` (the one place it is built)."""
         return cls(scenario, distance_cost=cfg.distance_cost, prereq_timing=cfg.prereq_timing,
-                   reward_split=cfg.reward_split, marginal_gain=cfg.marginal_gain)
+                   reward_split=cfg.reward_split, marginal_gain=cfg.marginal_gain, reward_time=cfg.reward_time)
 
     # -- paths and marginal gains, batched over agents ---------------------------------------------------------
     def schedule(self, agent: int, path: Sequence[int]) -> Schedule:
@@ -131,7 +134,7 @@ class ScoringModel:
             arrival[:, r] = t + leg[:, r] / speed
             start[:, r] = np.maximum(arrival[:, r], self.earliest[j])
             finish[:, r] = start[:, r] + s.task_duration[j]
-            reward[:, r] = self.pay[j] * np.exp(-self.lam * (start[:, r] - s.task_start[j]))
+            reward[:, r] = self.pay[j] * np.exp(-self.lam * self._lateness(arrival[:, r], start[:, r], j))
             cost[:, r] = self.gamma * (leg[:, r] if self.distance_cost == "leg" else from_start[rows, j])
             ok = (arrival[:, r] < self.deadline[j]) & self.doable[j]
             feasible &= ok | ~present[:, r]
@@ -147,7 +150,7 @@ class ScoringModel:
         begin = np.maximum(arrive, self.earliest)
         slots_open = np.arange(width + 1)[None, :] <= lengths[:, None]                   # (A, P+1)
         ok = (arrive < self.deadline) & self.doable & slots_open[:, :, None]
-        gain = self.pay * np.exp(-self.lam * (begin - s.task_start))
+        gain = self.pay * np.exp(-self.lam * self._lateness(arrive, begin, slice(None)))
         if self.distance_cost == "leg":
             detour = to_task.copy()
             detour[:, :width] += np.where(present[:, :, None], self.dist_task_task[padded] - leg[:, :, None], 0.0)
@@ -163,8 +166,11 @@ class ScoringModel:
                          + self.dist_task_task[padded[a_idx, n_idx], j_idx] / speed[a_idx])
                 delay = np.maximum(delay - arrival[a_idx, n_idx], 0.0)                        # D, (K,)
                 wait = np.where(present, start - arrival, 0.0)
-                if self.marginal_gain == "frozen":
+                if self.marginal_gain == "frozen":        # nothing already planned may change: start nor reward
                     fits = delay <= wait[a_idx, n_idx]
+                    if self.reward_time == "arrival":
+                        ahead = arrival[a_idx, n_idx] - s.task_start[padded[a_idx, n_idx]]
+                        fits &= (ahead + delay <= 0) | (delay == 0)
                     ok[a_idx[~fits], n_idx[~fits], j_idx[~fits]] = False
                 else:
                     fits, loss = self._propagate_delay(delay, a_idx, n_idx, lengths, arrival, wait, reward, padded)
@@ -178,14 +184,25 @@ class ScoringModel:
         return Plan(timing, np.where(positive, best, 0.0), np.where(positive, slot, -1))
 
 
+    def _lateness(self, arrival: np.ndarray, start: np.ndarray, tasks: Any) -> np.ndarray:
+        """τ − start_j of (3.8): τ the arrival, or the start for ``reward_time="start"``.
+
+        The thesis reads τ as the arrival and pays the full reward for "arriving on time", so an early arrival is not
+        paid more: τ = max(arrival, start_j). The two readings differ only when prerequisites hold the start back.
+        """
+        if self.reward_time == "start":
+            return start - self.scenario.task_start[tasks]
+        return np.maximum(arrival - self.scenario.task_start[tasks], 0.0)
+
     def _propagate_delay(self, delay: np.ndarray, a_idx: np.ndarray, n_idx: np.ndarray, lengths: np.ndarray,
                          arrival: np.ndarray, wait: np.ndarray, reward: np.ndarray,
                          padded: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Push each arrival delay D down the path from slot n: feasibility and reward change of the later tasks.
 
         At later task r the start slips by max(0, d − w_r) (d: its arrival delay, w_r: its waiting time), which is
-        the next task's arrival delay, and its reward scales by exp(−λ·slip). A delay absorbed by waiting stops, so
-        only the still-delayed triples are carried to the next position.
+        the next task's arrival delay. Its reward scales by exp(−λ·slip) (``reward_time="start"``) or by how much
+        later than start_j the agent now arrives (``arrival``). A delay absorbed by waiting stops, so only the
+        still-delayed triples are carried to the next position.
         """
         fits = np.ones(len(delay), dtype=bool)
         loss = np.zeros(len(delay))
@@ -201,7 +218,13 @@ class ScoringModel:
             fits[live[late]] = False
             slip = d - wait[a, r]
             delayed = slip > 0
-            loss[live[delayed]] += reward[a[delayed], r[delayed]] * np.expm1(-self.lam * slip[delayed])
+            if self.reward_time == "start":
+                later = np.maximum(slip, 0.0)
+            else:
+                ahead = arrival[a, r] - self.scenario.task_start[padded[a, r]]
+                later = np.maximum(ahead + d, 0.0) - np.maximum(ahead, 0.0)
+            hit = later > 0
+            loss[live[hit]] += reward[a[hit], r[hit]] * np.expm1(-self.lam * later[hit])
             carry = delayed & ~late
             live, d = live[carry], slip[carry]
             offset += 1

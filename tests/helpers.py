@@ -47,9 +47,11 @@ def ready_time(s: Scenario, j: int, prereq_timing: str) -> float:
     return max(float(s.task_start[m] + s.task_duration[m]) for m in prereqs)
 
 
-def replay(s: Scenario, agent: int, path: Sequence[int], *, distance_cost: str = "from_start",
-           prereq_timing: str = "conservative", reward_split: str = "per_agent") -> Replay:
-    """Walk the path with thesis (3.7)–(3.10), one task at a time (reward discounted from the start time)."""
+def replay(s: Scenario, agent: int, path: Sequence[int], *, distance_cost: str = "leg",
+           prereq_timing: str = "conservative", reward_split: str = "per_agent",
+           reward_time: str = "arrival") -> Replay:
+    """Walk the path with thesis (3.7)–(3.10), one task at a time; (3.8) discounts from the arrival, no earlier than
+    the window's start (``reward_time="arrival"``), or from the start time (``"start"``)."""
     loc = s.agent_pos[agent]
     t = 0.0
     speed = float(s.agent_speed[agent])
@@ -64,7 +66,8 @@ def replay(s: Scenario, agent: int, path: Sequence[int], *, distance_cost: str =
         pay = float(s.task_reward[j]) / (int(s.task_agents[j]) if reward_split == "total" else 1)
         out.arrival.append(arr)
         out.start.append(st)
-        out.reward.append(pay * math.exp(-s.time_discount * (st - float(s.task_start[j]))))
+        late = st - float(s.task_start[j]) if reward_time == "start" else max(arr - float(s.task_start[j]), 0.0)
+        out.reward.append(pay * math.exp(-s.time_discount * late))
         d = leg if distance_cost == "leg" else float(np.linalg.norm(s.task_pos[j] - s.agent_pos[agent]))
         out.cost.append(s.distance_discount * d)
         t = st + float(s.task_duration[j])
@@ -81,9 +84,11 @@ def reference_gain(s: Scenario, agent: int, path: Sequence[int], j: int, *, marg
         trial = replay(s, agent, [*path[:n], j, *path[n:]], **scoring)
         if not trial.feasible:
             continue
-        if marginal_gain == "frozen":
+        if marginal_gain == "frozen":           # nothing planned may change: neither a start time nor a reward
             kept = trial.start[:n] + trial.start[n + 1:]
-            if any(abs(a - b) > 1e-9 for a, b in zip(kept, base.start)):
+            paid = trial.reward[:n] + trial.reward[n + 1:]
+            if any(abs(a - b) > 1e-9 for a, b in zip(kept, base.start)) or \
+                    any(abs(a - b) > 1e-9 for a, b in zip(paid, base.reward)):
                 continue
         gain = trial.score - base.score
         if gain > best + 1e-12:
@@ -252,7 +257,8 @@ def check_path_timing(s: Scenario, i: int, path: Sequence[int], r: Replay) -> No
 
 def scoring_options(env: TaskAllocEnv) -> dict:
     c = env.config
-    return {"distance_cost": c.distance_cost, "prereq_timing": c.prereq_timing, "reward_split": c.reward_split}
+    return {"distance_cost": c.distance_cost, "prereq_timing": c.prereq_timing, "reward_split": c.reward_split,
+            "reward_time": c.reward_time}
 
 
 def check_converged_allocation(env: TaskAllocEnv, episode: Episode, *, full_comms: bool = True) -> None:

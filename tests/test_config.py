@@ -25,7 +25,9 @@ def test_spec_defaults():
     assert cfg.cbba_table == "canonical"
     assert cfg.task_quitting is False and cfg.delta == 1
     assert cfg.reset_on == "additions"
-    assert cfg.quit_block == "none"
+    assert cfg.quit_block == "until_joined"      # the article's rule (docs/decisions.md)
+    assert cfg.distance_cost == "leg" and cfg.bid_warping and cfg.outbid_ties == "strict"
+    assert cfg.reward_time == "arrival" and cfg.marginal_gain == "rescore"
     assert cfg.edge_rule == "dist" and cfg.comm_range is None
     assert cfg.reward_split == "per_agent"
     assert cfg.units == "km_min"

@@ -42,7 +42,7 @@ PROPERTY_SETTINGS = settings(max_examples=400, deadline=None, suppress_health_ch
 
 @st.composite
 def scenario_config(draw, *, limited_comms: bool = False, small: bool = False,
-                    distance_costs: tuple[str, ...] = ("from_start",)):
+                    distance_costs: tuple[str, ...] = ("leg", "from_start")):
     n_agents = draw(st.integers(2, 4 if small else 6))
     n_tasks = draw(st.integers(2, 5 if small else 8))
     kw: dict = {"n_agents": n_agents, "n_tasks": n_tasks,
@@ -74,7 +74,10 @@ def scenario_config(draw, *, limited_comms: bool = False, small: bool = False,
     kw["cbba_table"] = draw(st.sampled_from(["canonical", "thesis"]))
     kw["consensus"] = draw(st.sampled_from(["sync", "sync", "every_step"]))
     kw["reset_on"] = draw(st.sampled_from(["additions", "any_change"]))
-    kw["quit_block"] = draw(st.sampled_from(["none", "until_change"]))
+    # the per-leg cost is not DMG: without warped bids greedy CBGA may cycle (docs/decisions.md), so it gets them
+    kw["bid_warping"] = True if kw["distance_cost"] == "leg" else draw(st.booleans())
+    kw["outbid_ties"] = draw(st.sampled_from(["strict", "higher_id"]))
+    kw["quit_block"] = draw(st.sampled_from(["until_joined", "none"]))
     if draw(st.booleans()):
         kw["max_bundle"] = draw(st.integers(1, 3))
     if limited_comms:
@@ -192,6 +195,7 @@ def expected_bid_mask(env: TaskAllocEnv, i: int) -> tuple[np.ndarray, np.ndarray
         gain = actual[j]                  # equal bids must compare exactly (ties go by id), so use the stored value
         if j in path or gain <= 0 or len(kn.bundles[i]) >= cap:
             continue
+        bid = warped_bid(env, i, gain)
         te = {e: int(c) for e, c in enumerate(s.task_equipment[j]) if c > 0}
         if te and not (ae[i] & set(te)):
             continue                                                        # filter 1: equipment
@@ -214,7 +218,7 @@ def expected_bid_mask(env: TaskAllocEnv, i: int) -> tuple[np.ndarray, np.ndarray
                 continue
         members = [int(k) for k in np.flatnonzero(table[:, j] > 0)]
         if L == 1:
-            h = not members or bool(outbids(gain, i, table[members[0], j], members[0]))
+            h = not members or beats(env, bid, i, table[members[0], j], members[0])
         else:
             unmet = dict(te)
             for k in members:
@@ -227,9 +231,23 @@ def expected_bid_mask(env: TaskAllocEnv, i: int) -> tuple[np.ndarray, np.ndarray
             else:
                 victims = [k for k in members if not te or (ae[k] & ae[i] & set(te))]
                 low = min(victims, key=lambda k: (table[k, j], k)) if victims else None
-                h = low is not None and bool(outbids(gain, i, table[low, j], low))
+                h = low is not None and beats(env, bid, i, table[low, j], low)
         allowed[j] = h
     return allowed, gains
+
+
+def warped_bid(env: TaskAllocEnv, i: int, gain: float) -> float:
+    """The bid i would store: c_ij, or with ``bid_warping`` no more than any bid it already holds in its bundle."""
+    kn = env.protocol.knowledge
+    held = [kn.bids[i, i, b] for b in kn.bundles[i]]
+    return min([gain, *held]) if env.config.bid_warping else gain
+
+
+def beats(env: TaskAllocEnv, bid: float, i: int, held: float, holder: int) -> bool:
+    """Alg 5 l. 12/18: a strictly higher bid (``outbid_ties=strict``), or the (bid, id) order (``higher_id``)."""
+    if env.config.outbid_ties == "strict":
+        return bid > held
+    return bool(outbids(bid, i, held, holder))
 
 
 def expected_quit_mask(env: TaskAllocEnv, i: int) -> np.ndarray:
@@ -312,18 +330,18 @@ def test_masks_gains_and_choices_follow_the_spec(kw, variant, seed):
                 expected[a] = 0
         actions = policy.act(obs, infos)
         assert actions == expected
-        before = {a: float(gains_of(env, a, actions[a])) for a in actions if 0 < actions[a] <= m}
+        before = {a: float(bids_of(env, a, actions[a])) for a in actions if 0 < actions[a] <= m}
         obs, _, _, _, infos = env.step(actions)
         kn = env.protocol.knowledge
         for a, gain in before.items():
             i, j = env.agent_index[a], actions[a] - 1
             if env.config.consensus == "sync":      # the round cannot end in a step where someone bids
-                assert kn.bids[i, i, j] == gain, "the stored bid is the individual marginal gain c_ij"
+                assert kn.bids[i, i, j] == gain, "the stored bid is c_ij, or its warped value (bid_warping)"
     assert env.evaluate().converged
 
 
-def gains_of(env: TaskAllocEnv, agent: str, action: int) -> float:
-    return env.protocol.view().gain[env.agent_index[agent], action - 1]
+def bids_of(env: TaskAllocEnv, agent: str, action: int) -> float:
+    return env.protocol.view().bid[env.agent_index[agent], action - 1]
 
 
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])

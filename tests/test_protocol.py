@@ -36,8 +36,9 @@ def line_positions(n: int, spacing: float = 1.0) -> np.ndarray:
 
 # -- outbid release (thesis §2.2.4; Johnson (3.11)–(3.12)) ----------------------------------------------------------
 def release_scenario(agents_per_task: int):
-    """Agent 0 at the origin values T0, T1, T2 at 80 each (γ = 10, 2 away); windows open at 100, 200, 300, so the
-    path order is T0, T1, T2 whatever the bundle order. Agents 1 and 2 sit 0.5 from T0 and bid 95 on it."""
+    """Agent 0 at the origin values T0, T1, T2 at 80 each (γ = 10, 2 away, with the start-distance cost the tests
+    set); windows open at 100, 200, 300, so the path order is T0, T1, T2 whatever the bundle order. Agents 1 and 2 sit
+    0.5 from T0 and bid 95 on it."""
     agents = [agent(0), agent(2, 0.5), agent(2, -0.5)]
     tasks = [task(2, start=100, agents=agents_per_task), task(0, 2, start=200, agents=agents_per_task),
              task(0, 0, 2, start=300, agents=agents_per_task)]
@@ -46,7 +47,7 @@ def release_scenario(agents_per_task: int):
 
 @pytest.mark.parametrize("order, kept", [("bundle", [2]), ("path", [])])
 def test_outbid_release_single_agent_tasks(order, kept):
-    p = protocol(release_scenario(1), release_order=order)
+    p = protocol(release_scenario(1), release_order=order, distance_cost="from_start")
     for j in (2, 0, 1):                             # bundle (T2, T0, T1), path (T0, T1, T2)
         assert p.bid(0, j) == pytest.approx(80.0)
     assert p.knowledge.bundles[0] == [2, 0, 1] and p.knowledge.paths[0] == [0, 1, 2]
@@ -68,7 +69,7 @@ def test_outbid_release_single_agent_tasks(order, kept):
 @pytest.mark.parametrize("order, kept", [("bundle", [2]), ("path", [])])
 def test_outbid_release_multi_agent_eviction(order, kept):
     """L = 2: agents 1 and 2 (95 each) push agent 0 (80) out of T0 in Pass B; agent 0 releases T0 and what follows."""
-    p = protocol(release_scenario(2), release_order=order)
+    p = protocol(release_scenario(2), release_order=order, distance_cost="from_start")
     for j in (2, 0, 1):
         p.bid(0, j)
     p.bid(1, 0)
@@ -302,7 +303,7 @@ def test_quit_timer_sync(joiner):
 def test_quit_releases_later_tasks_and_happens_once():
     """Alg 9 l. 6–8 and thesis §5.2.2: quitting zeroes i's bid, sets Q_i[j] = 1 and releases the tasks after j; the
     agent may bid on j again (quit_block = none) but can never quit it a second time."""
-    p = protocol(quit_scenario(), task_quitting=True, delta=1)
+    p = protocol(quit_scenario(), task_quitting=True, delta=1, quit_block="none")
     p.bid(0, 0)
     p.bid(0, 1)
     for _ in range(2):
@@ -346,19 +347,32 @@ def test_quit_preconditions():
         assert not on.quit_options()[1:].any()      # not members
 
 
-def test_quit_block_until_change():
+def test_quit_block_until_joined():
     """The article's rule (after its eq. (10)), 'unfeasible until other agents assign themselves': no re-bid on j
-    until j's member count changes."""
-    p = protocol(quit_scenario(), task_quitting=True, delta=1, quit_block="until_change")
+    until another agent joins j; a member leaving does not lift the block."""
+    p = protocol(quit_scenario(), task_quitting=True, delta=1, quit_block="until_joined")
     p.bid(0, 0)
-    for _ in range(2):
+    p.bid(2, 0)
+    for _ in range(3):                                # both joined in round 0, heard of each other in round 1: H = 1
         p.end_round()
     p.quit(0, 0)
     assert not p.view().can_bid[0, 0]
     p.end_round()
     assert not p.view().can_bid[0, 0]
-    p.bid(1, 0)
+    p.quit(2, 0)                                      # a departure: still blocked
     p.end_round()
+    assert not p.view().can_bid[0, 0] and p.view().members[0, 0] == 0
+    p.bid(1, 0)                                       # another agent assigns itself: the block lifts
+    p.end_round()
+    assert p.view().can_bid[0, 0]
+
+
+def test_quit_block_none_lets_the_quitter_bid_again_at_once():
+    p = protocol(quit_scenario(), task_quitting=True, delta=1, quit_block="none")
+    p.bid(0, 0)
+    for _ in range(2):
+        p.end_round()
+    p.quit(0, 0)
     assert p.view().can_bid[0, 0]
 
 

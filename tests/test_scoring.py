@@ -78,17 +78,20 @@ def test_late_arrival_is_discounted_from_the_task_start():
     assert early.start[0] == pytest.approx(3.0) and early.reward[0] == pytest.approx(80.0)
 
 
+@pytest.mark.parametrize("reward_time", ["arrival", "start"])
 @pytest.mark.parametrize("timing, start", [("conservative", 13.0), ("earliest", 5.0), ("none", 5.0)])
-def test_prerequisite_timing(timing, start):
+def test_prerequisite_timing(timing, start, reward_time):
     """P window [0, 10], dur 3; follow-up F (P ∈ P_F) reached at 5: conservative waits until end_P + dur_P = 13,
-    earliest needs start_P + dur_P = 3 (already passed), none ignores P (``prereq_timing``, our choice)."""
+    earliest needs start_P + dur_P = 3 (already passed), none ignores P (``prereq_timing``, our choice). (3.8)
+    discounts from the arrival τ = 5 (``reward_time="arrival"``, the thesis's words) or from the start."""
     s = build([agent(0)], [task(0, 9, reward=100, start=0, end=10, duration=3),
                            task(5, reward=100, start=0, end=20, prerequisites=(0,))],
               time_discount=LAM, distance_discount=0.0)
-    sch = model(s, prereq_timing=timing).schedule(0, [1])
+    sch = model(s, prereq_timing=timing, reward_time=reward_time).schedule(0, [1])
     assert sch.feasible
     assert sch.start[0] == pytest.approx(start)
-    assert sch.reward[0] == pytest.approx(100 * math.exp(-LAM * start))
+    late = 5.0 if reward_time == "arrival" else start
+    assert sch.reward[0] == pytest.approx(100 * math.exp(-LAM * late))
 
 
 def test_prerequisite_that_ends_too_late_makes_the_follow_up_impossible():
@@ -172,7 +175,7 @@ def random_paths(draw):
     s = generate(cfg, np.random.default_rng(seed))
     options = {"distance_cost": draw(st.sampled_from(["leg", "from_start"])),
                "prereq_timing": draw(st.sampled_from(["conservative", "earliest", "none"])),
-               "reward_split": "per_agent"}
+               "reward_split": "per_agent", "reward_time": draw(st.sampled_from(["arrival", "start"]))}
     marginal = draw(st.sampled_from(["rescore", "frozen"]))
     # a feasible path built by the reference itself: random tasks at their best positive insertion
     path: list[int] = []
