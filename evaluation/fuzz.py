@@ -1,18 +1,19 @@
 """Fuzzing: random scenarios across every option, every policy, and the invariants that must hold on each episode.
 
-    python -m evaluation.fuzz                      # 300 episodes (about a minute), seed 0
+    python -m evaluation.fuzz                      # 300 episodes (seconds), seed 0
     python -m evaluation.fuzz --episodes 20000 --seed 7 --jobs 2
 
 Each episode draws a config (sizes, L_j, equipment mixes, prerequisite chains, communication range, every named
-scoring and protocol option), a policy (random, CBGA and its variants, CBBA where every L_j = 1) and a seed, runs it
-and checks:
+scoring and protocol option, message loss, bursts, delays and failing agents), a policy (random, CBGA and its
+variants, CBBA where every L_j = 1) and a seed, runs it and checks:
 
 * ``spaces``: every observation lies in its space, every mask is binary int8 with pass allowed, every action the
   policy takes is allowed;
 * ``return``: the episode return × reward_scale equals ``evaluate().score``;
-* ``converged``: the episode ends by convergence, not by the round bound, when links are perfect;
-* ``agreement`` and ``conflict-free``: at convergence on a connected network every agent holds the same table and no
-  task has more than L_j members (thesis §3.2: the consensus reaches a conflict-free allocation);
+* ``converged``: the episode ends by convergence, not by the round bound (lost and delayed messages and failing
+  agents included);
+* ``agreement`` and ``conflict-free``: at convergence on a connected network every live agent holds the same table
+  and no task has more than L_j members (thesis §3.2: the consensus reaches a conflict-free allocation);
 * ``valid groups``: every valid task has exactly L_j members whose equipment covers it, and its prerequisites are
   valid;
 * ``determinism``: the same (config, policy, seed) run again gives byte-identical observations, rewards and infos.
@@ -78,6 +79,14 @@ def draw_config(rng: np.random.Generator) -> dict[str, Any]:
         kw[field] = str(rng.choice(values))
     if rng.random() < 0.3:
         kw["max_bundle"] = int(rng.integers(1, 4))
+    if rng.random() < 0.4:                              # an imperfect network (network.Network)
+        kw["message_loss"] = float(rng.choice([0.0, 0.1, 0.3]))
+        kw["max_delay"] = int(rng.integers(0, 3))
+        if rng.random() < 0.3:
+            kw["loss_model"] = "gilbert_elliott"
+        if rng.random() < 0.3:
+            kw["dropouts"] = 1
+            kw["dropout_rounds"] = [1, 6]
     return kw
 
 
@@ -105,7 +114,7 @@ def _episode(kw: dict[str, Any], policy: Any, seed: int, verdict: dict[str, Any]
             binary = set(np.unique(mask).tolist()) <= {0, 1}
             spaces_ok &= space.contains(o) and mask.dtype == np.int8 and bool(mask[0]) and binary
             digest.update(o["observation"].tobytes() + mask.tobytes())
-        actions = policy.act(obs, infos)
+        actions = policy.act({a: obs[a] for a in env.agents}, infos)
         spaces_ok &= all(obs[a]["action_mask"][act] == 1 for a, act in actions.items())
         obs, rewards, _, _, infos = env.step(actions)
         total += sum(rewards.values()) / max(1, len(rewards))
@@ -113,7 +122,8 @@ def _episode(kw: dict[str, Any], policy: Any, seed: int, verdict: dict[str, Any]
     if verdict is not None:
         allocation = env.evaluate()
         protocol = env.protocol
-        connected = bool((protocol.graph.component == 0).all())
+        live = protocol.alive
+        connected = bool((protocol.live_graph.component[live] == np.flatnonzero(live)[0]).all())
         verdict.update({"spaces": spaces_ok, "return": abs(total * env.reward_scale - allocation.score) < 1e-6,
                         "converged": allocation.converged})
         at_rest = allocation.converged and connected

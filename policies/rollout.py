@@ -17,6 +17,7 @@ def rollout(env: Any, policy: Policy, seed: int | None = None) -> Allocation:
     observations, infos = env.reset(seed=seed)
     policy.start(env, seed)
     while env.agents:
-        actions = policy.act(observations, infos)
+        live = env.agents            # agents that left (e.g. failed) are still in the last step's returns
+        actions = policy.act({a: observations[a] for a in live}, {a: infos[a] for a in live})
         observations, _, _, _, infos = env.step(actions)
     return env.unwrapped.evaluate()

@@ -28,6 +28,16 @@ class Counters:
     # "when all agents converge to the same conflict-free solution" (§3.2.3), before our D + 1 quiet rounds confirm it
     rounds_to_agreement: int = 0
     messages_to_agreement: int = 0
+    # the network (network.Network): messages sent, lost and delayed; data items sent (received: data_items);
+    # bids later replaced by a better one (thesis Fig 4.10's conflicting bids); agents that failed; tables cleared of
+    # an agent that went silent for silence_timeout rounds
+    messages_sent: int = 0
+    messages_lost: int = 0
+    messages_delayed: int = 0
+    data_items_sent: int = 0
+    conflicting_bids: int = 0
+    dropped_agents: int = 0
+    silent_releases: int = 0
 
 
 @dataclasses.dataclass(frozen=True)

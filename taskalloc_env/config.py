@@ -53,6 +53,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "consensus": ("sync", "every_step"),
     "outbid_ties": ("strict", "higher_id"),
     "reward_time": ("arrival", "start"),
+    "loss_model": ("independent", "gilbert_elliott"),
 }
 
 
@@ -130,6 +131,17 @@ class TaskAllocConfig:
     bid_warping: bool = True
     max_bundle: int | None = None
     max_rounds: int | None = None
+    # -- the network (network.Network; faults are ours: the sources assume every message arrives) --
+    message_loss: float = 0.0
+    loss_model: str = "independent"
+    burst_enter: float = 0.05
+    burst_leave: float = 0.5
+    burst_loss: float = 1.0
+    max_delay: int = 0
+    dropouts: int = 0
+    dropout_rounds: tuple[int, int] = (1, 10)
+    dropout_schedule: tuple[tuple[int, int], ...] | None = None
+    silence_timeout: int | None = None
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -137,6 +149,12 @@ class TaskAllocConfig:
     def replace(self, **overrides: Any) -> TaskAllocConfig:
         """A copy with ``overrides`` applied; values are normalised and validated like YAML values."""
         return from_mapping({**to_mapping(self), **overrides})
+
+    @property
+    def faulty(self) -> bool:
+        """Whether messages can be lost or delayed, or agents fail (the network is not perfect)."""
+        return (self.message_loss > 0 or self.loss_model == "gilbert_elliott" or self.max_delay > 0
+                or self.dropouts > 0 or bool(self.dropout_schedule))
 
     @property
     def speed_internal(self) -> float:
@@ -217,6 +235,32 @@ def _validate(cfg: TaskAllocConfig) -> None:
         if not isinstance(getattr(cfg, name), bool):
             _fail(name, getattr(cfg, name), "true | false")
     _check_positive_int("delta", cfg.delta, minimum=0)
+    for name in ("message_loss", "burst_enter", "burst_leave", "burst_loss"):
+        value = getattr(cfg, name)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
+            _fail(name, value, "a probability in [0, 1]")
+    _check_positive_int("max_delay", cfg.max_delay, minimum=0)
+    _check_positive_int("dropouts", cfg.dropouts, minimum=0)
+    if cfg.dropouts >= cfg.n_agents:
+        _fail("dropouts", cfg.dropouts, f"fewer than n_agents = {cfg.n_agents} (one agent must stay)")
+    if len(cfg.dropout_rounds) != 2:
+        _fail("dropout_rounds", cfg.dropout_rounds, "two rounds [earliest, latest]")
+    _check_positive_int("dropout_rounds", cfg.dropout_rounds[0])
+    _check_positive_int("dropout_rounds", cfg.dropout_rounds[1], minimum=cfg.dropout_rounds[0])
+    if cfg.dropout_schedule is not None:
+        if cfg.dropouts:
+            _fail("dropout_schedule", cfg.dropout_schedule, "null when dropouts > 0 (one or the other)")
+        for entry in cfg.dropout_schedule:
+            if not (isinstance(entry, tuple) and len(entry) == 2):
+                _fail("dropout_schedule", cfg.dropout_schedule, "a list of [agent, round] pairs")
+            _check_positive_int("dropout_schedule", entry[0], minimum=0)
+            _check_positive_int("dropout_schedule", entry[1])
+            if entry[0] >= cfg.n_agents:
+                _fail("dropout_schedule", entry, f"an agent id below n_agents = {cfg.n_agents}")
+        if len({a for a, _ in cfg.dropout_schedule}) != len(cfg.dropout_schedule):
+            _fail("dropout_schedule", cfg.dropout_schedule, "each agent at most once")
+    if cfg.silence_timeout is not None:
+        _check_positive_int("silence_timeout", cfg.silence_timeout)
     if cfg.agent_types is not None and (
             not cfg.agent_types or len(set(cfg.agent_types)) != len(cfg.agent_types)
             or not all(isinstance(t, str) and t for t in cfg.agent_types)):
@@ -284,6 +328,10 @@ def _normalise(name: str, value: Any) -> Any:
                      for v in _as_tuple(name, value))
     if name in ("agent_types", "agent_type_counts") and value is not None:
         return _as_tuple(name, value)
+    if name == "dropout_rounds":
+        return _as_tuple(name, value)
+    if name == "dropout_schedule" and value is not None:
+        return tuple(tuple(entry) if isinstance(entry, (list, tuple)) else entry for entry in _as_tuple(name, value))
     if name == "task_mix" and value is not None:
         mixes = []
         for entry in _as_tuple(name, value):
@@ -302,7 +350,8 @@ def _normalise(name: str, value: Any) -> Any:
             return value
         _check_record(name, value, ("chains", "length", "followup_window"), required="chains")
         return PrerequisiteChains(**value)
-    if name in ("speed", "reward", "time_discount", "distance_discount", "window", "duration", "comm_range") \
+    if name in ("speed", "reward", "time_discount", "distance_discount", "window", "duration", "comm_range",
+                "message_loss", "burst_enter", "burst_leave", "burst_loss") \
             and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
     return value
@@ -329,7 +378,7 @@ def to_mapping(cfg: TaskAllocConfig) -> dict[str, Any]:
         elif name == "prerequisites" and value is not None:
             value = dataclasses.asdict(value)
         elif isinstance(value, tuple):
-            value = list(value)
+            value = [list(v) if isinstance(v, tuple) else v for v in value]
         out[name] = value
     return out
 

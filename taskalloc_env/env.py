@@ -162,7 +162,10 @@ class TaskAllocEnv(ParallelEnv):
         if seed is not None:
             self._np_random, self._np_random_seed = seeding.np_random(seed)
         scenario = self.fixed_scenario or generate(self.config, self._np_random)
-        self._protocol = Protocol(scenario, self.config)
+        # faults draw from a generator spawned from the env's own (after the instance), so episodes replay from the
+        # seed; a perfect network draws nothing, so it leaves the env's random stream as it was
+        network_rng = np.random.default_rng(self._np_random.integers(2**63)) if self.config.faulty else None
+        self._protocol = Protocol(scenario, self.config, rng=network_rng)
         self._builder = ObservationBuilder(self._protocol, self._max_agents_per_task, self._max_rounds)
         self.agents = list(self.possible_agents)
         self._passed = np.zeros(len(self.possible_agents), dtype=bool)
@@ -200,7 +203,7 @@ class TaskAllocEnv(ParallelEnv):
         round_over = self.config.consensus == "every_step" or bool(self._passed.all())
         if round_over:
             protocol.end_round()
-            self._passed[:] = False
+            self._passed[:] = ~protocol.alive                  # a failed agent takes no further part
         score = protocol.score().score
         reward = (score - self._last_score) / self.reward_scale
         self._last_score = score
@@ -211,12 +214,14 @@ class TaskAllocEnv(ParallelEnv):
         agents = list(self.agents)
         observations = self._observations()
         rewards = {a: reward for a in agents}
-        terminations = {a: terminated for a in agents}
+        terminations = {a: terminated or not protocol.alive[self.agent_index[a]] for a in agents}
         truncations = {a: truncated for a in agents}
         infos = self._infos(flags)
         if terminated or truncated:
             self._done = True
             self.agents = []
+        else:                                                   # failed agents leave (PettingZoo: terminated)
+            self.agents = [a for a in agents if protocol.alive[self.agent_index[a]]]
         # human mode redraws its window every step (Gymnasium's convention); saving a file every step would cost a
         # figure per step, so with render_path the file is written at the end of the episode and on render() calls
         if self.render_mode == "human" and (self.render_path is None or not self.agents):
@@ -320,7 +325,7 @@ class TaskAllocEnv(ParallelEnv):
     def evaluate(self) -> Allocation:
         """The allocation as it stands: paths with start times, groups, valid tasks, conflicts, score, traffic."""
         p = self.protocol
-        return Allocation.from_paths(p.model, p.knowledge.paths, self.config.conflict_policy, schedules=p.schedules,
+        return Allocation.from_paths(p.model, p.flown_paths, self.config.conflict_policy, schedules=p.schedules,
                                      counters=dataclasses.replace(p.counters), converged=p.converged,
                                      agreement=p.agreement())
 

@@ -1,4 +1,22 @@
-"""The communication graph g_ik (thesis §2.2.4, §3.2.1): fully connected, or range-limited between start positions.
+"""Who hears whom, and when: the communication graph and the ``Network`` that delivers messages.
+
+A round of consensus (thesis §3.2.3, Phase 2) has two halves: *sending* — every live agent broadcasts a snapshot of its
+own table to its neighbours (``consensus.snapshot``) — and *delivery*, decided here: which receiver gets which
+message, and in which round. The consensus rules (``consensus.exchange``) only see the messages that arrive, so they
+never need to know how the network behaves. ``Network`` composes the graph with a loss model and a delay:
+
+* ``perfect`` links (the default): every message arrives in the round it is sent;
+* ``message_loss`` p: each message is lost independently with probability p; ``loss_model="gilbert_elliott"``:
+  each link is a two-state channel (Gilbert 1960, Elliott 1963) that enters the bad state with probability
+  ``burst_enter`` and leaves it with ``burst_leave`` per round, losing messages with p in the good state and
+  ``burst_loss`` in the bad one, so losses come in bursts;
+* ``max_delay`` d: each message arrives after a uniform random number of rounds in 0..d, so rounds overlap and a
+  receiver may process an old message after a newer one (the timestamps of thesis (2.4) sort that out).
+
+All randomness comes from one ``numpy.random.Generator`` handed in by the environment (spawned from its seeded
+generator), so an episode with faults is exactly reproducible from its seed.
+
+The graph g_ik (thesis §2.2.4, §3.2.1): fully connected, or range-limited between start positions.
 
 The thesis draws a range circle per agent (thesis §4.3, Figs 4.2–4.5) but never writes the edge rule, so it is our
 choice: ``edge_rule="dist"`` links agents at distance ≤ r; ``"circles_overlap"`` links them when their range
@@ -9,15 +27,23 @@ needs up to D rounds to cross the network, thesis §4.3).
 
 from __future__ import annotations
 
+import abc
+import dataclasses
+
 import numpy as np
 from scipy.sparse import csr_array
 from scipy.sparse.csgraph import connected_components, shortest_path
+
+from taskalloc_env.config import TaskAllocConfig
+from taskalloc_env.errors import ConfigError
 
 
 class CommGraph:
     """Symmetric graph without self-loops; neighbours of each agent in ascending id order."""
 
-    def __init__(self, positions: np.ndarray, comm_range: float | None = None, edge_rule: str = "dist") -> None:
+    def __init__(self, positions: np.ndarray, comm_range: float | None = None, edge_rule: str = "dist",
+                 alive: np.ndarray | None = None) -> None:
+        """Links between ``positions``; agents not ``alive`` (failed) have none."""
         n = len(positions)
         if comm_range is None:
             adjacency = ~np.eye(n, dtype=bool)
@@ -25,13 +51,15 @@ class CommGraph:
             reach = comm_range if edge_rule == "dist" else 2.0 * comm_range
             dist = np.linalg.norm(positions[:, None, :] - positions[None, :, :], axis=2)
             adjacency = (dist <= reach) & ~np.eye(n, dtype=bool)
+        if alive is not None:
+            adjacency &= alive[:, None] & alive[None, :]
         self.adjacency = adjacency
         self.adjacency.setflags(write=False)
         self.neighbours = [np.flatnonzero(adjacency[i]) for i in range(n)]
         self.degree = adjacency.sum(axis=1)
         graph = csr_array(adjacency)
         # breadth-first search from every agent: O(N · links), not the O(N³) of boolean matrix powers
-        self.hops = np.ones((n, n)) - np.eye(n) if comm_range is None else \
+        self.hops = np.ones((n, n)) - np.eye(n) if comm_range is None and alive is None else \
             shortest_path(graph, method="D", unweighted=True, directed=False)
         finite = self.hops[np.isfinite(self.hops)]
         self.diameter = int(finite.max()) if finite.size else 0
@@ -49,3 +77,161 @@ class CommGraph:
     @property
     def n_agents(self) -> int:
         return len(self.adjacency)
+
+
+# -- delivery -------------------------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class Deliveries:
+    """Messages arriving in one round, sorted by receiver, then by the round they were sent in, then by sender.
+
+    A receiver handles its messages in that order (thesis §3.2.3: in ascending sender id within a round).
+    """
+
+    receiver: np.ndarray        # (K,)
+    sender: np.ndarray          # (K,)
+    sent: np.ndarray            # (K,) the round each was sent in
+
+    @classmethod
+    def of(cls, receiver: np.ndarray, sender: np.ndarray, sent: np.ndarray) -> Deliveries:
+        order = np.lexsort((sender, sent, receiver))
+        return cls(receiver[order], sender[order], sent[order])
+
+    def __len__(self) -> int:
+        return len(self.receiver)
+
+    def positions(self) -> list[np.ndarray]:
+        """Index arrays: position p holds every receiver's p-th message, so no receiver appears twice in one."""
+        if not len(self):
+            return []
+        first = np.r_[0, np.flatnonzero(np.diff(self.receiver)) + 1]
+        rank = np.arange(len(self)) - np.repeat(first, np.diff(np.r_[first, len(self)]))
+        return [np.flatnonzero(rank == p) for p in range(int(rank.max()) + 1)]
+
+
+class LossModel(abc.ABC):
+    """Which of a round's messages (sender → receiver pairs) are lost."""
+
+    @abc.abstractmethod
+    def lost(self, sender: np.ndarray, receiver: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """A boolean mask over the messages."""
+
+
+class NoLoss(LossModel):
+    def lost(self, sender: np.ndarray, receiver: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        return np.zeros(len(sender), dtype=bool)
+
+
+class IndependentLoss(LossModel):
+    """Each message is lost with probability ``p``, independently of every other."""
+
+    def __init__(self, p: float) -> None:
+        self.p = p
+
+    def lost(self, sender: np.ndarray, receiver: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        return rng.random(len(sender)) < self.p
+
+
+class GilbertElliott(LossModel):
+    """Bursty loss: every link is a two-state Markov channel, stepped once per round it carries a message."""
+
+    def __init__(self, n_agents: int, loss_good: float, loss_bad: float, enter_bad: float, leave_bad: float) -> None:
+        self.bad = np.zeros((n_agents, n_agents), dtype=bool)
+        self.loss_good, self.loss_bad = loss_good, loss_bad
+        self.enter_bad, self.leave_bad = enter_bad, leave_bad
+
+    def lost(self, sender: np.ndarray, receiver: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        was_bad = self.bad[sender, receiver]
+        flip = rng.random(len(sender)) < np.where(was_bad, self.leave_bad, self.enter_bad)
+        bad = was_bad ^ flip
+        self.bad[sender, receiver] = bad
+        return rng.random(len(sender)) < np.where(bad, self.loss_bad, self.loss_good)
+
+
+@dataclasses.dataclass(frozen=True)
+class Sent:
+    """What one round of sending did: messages sent, lost and delayed (not delivered in the round they were sent)."""
+
+    sent: int
+    lost: int
+    delayed: int
+    data_items: int
+
+
+class Network:
+    """Delivers each round's broadcasts over ``graph`` through a loss model and a random delay.
+
+    ``send`` queues the messages of the senders (each to all its neighbours), ``deliver`` hands out those due.
+    """
+
+    def __init__(self, graph: CommGraph, loss: LossModel | None = None, max_delay: int = 0,
+                 rng: np.random.Generator | None = None) -> None:
+        self.graph = graph
+        self.loss = loss or NoLoss()
+        self.max_delay = max_delay
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self._queue = (np.zeros(0, dtype=np.int64),) * 4      # receiver, sender, sent, due
+
+    @property
+    def perfect(self) -> bool:
+        return isinstance(self.loss, NoLoss) and self.max_delay == 0
+
+    def send(self, now: int, senders: np.ndarray, items: np.ndarray) -> Sent:
+        """Every agent of ``senders`` broadcasts to its neighbours; ``items`` (N,) the data items of each message."""
+        sending = np.zeros(self.graph.n_agents, dtype=bool)
+        sending[senders] = True
+        sender, receiver = np.nonzero(self.graph.adjacency & sending[:, None])      # sender-major, ascending
+        lost = self.loss.lost(sender, receiver, self.rng)
+        delay = self.rng.integers(0, self.max_delay + 1, len(sender)) if self.max_delay else np.zeros(len(sender), int)
+        keep = ~lost
+        queued = (receiver[keep], sender[keep], np.full(int(keep.sum()), now), now + delay[keep])
+        self._queue = tuple(np.concatenate([old, new]) for old, new in zip(self._queue, queued))
+        return Sent(sent=len(sender), lost=int(lost.sum()), delayed=int((delay[keep] > 0).sum()),
+                    data_items=int(items[sender].sum()))
+
+    def deliver(self, now: int, alive: np.ndarray) -> Deliveries:
+        """The messages due by ``now`` whose receiver is alive (a failed receiver's messages are dropped)."""
+        receiver, sender, sent, due = self._queue
+        ready = due <= now
+        self._queue = tuple(a[~ready] for a in self._queue)
+        take = ready & alive[receiver]
+        return Deliveries.of(receiver[take], sender[take], sent[take])
+
+    def in_flight(self) -> np.ndarray:
+        """The send rounds of the messages still travelling."""
+        return self._queue[2]
+
+
+def make_network(graph: CommGraph, cfg: TaskAllocConfig, rng: np.random.Generator) -> Network:
+    """The ``Network`` the config names (``message_loss``, ``loss_model``, ``burst_*``, ``max_delay``)."""
+    if cfg.loss_model == "gilbert_elliott":
+        loss: LossModel = GilbertElliott(graph.n_agents, cfg.message_loss, cfg.burst_loss, cfg.burst_enter,
+                                         cfg.burst_leave)
+    elif cfg.message_loss > 0:
+        loss = IndependentLoss(cfg.message_loss)
+    else:
+        loss = NoLoss()
+    return Network(graph, loss, cfg.max_delay, rng)
+
+
+def dropout_schedule(cfg: TaskAllocConfig, n_agents: int, horizon: int,
+                     rng: np.random.Generator) -> dict[int, tuple[int, ...]]:
+    """Round → the agents that fail at its start: ``dropout_schedule`` as given, or ``dropouts`` agents drawn at
+    random, each at a round drawn uniformly from ``dropout_rounds``. A round past ``horizon`` (the round bound) is an
+    error: that agent could never fail."""
+    if cfg.dropout_schedule:
+        pairs = list(cfg.dropout_schedule)
+    elif cfg.dropouts:
+        agents = rng.choice(n_agents, size=cfg.dropouts, replace=False)
+        lo, hi = cfg.dropout_rounds
+        pairs = [(int(a), int(r)) for a, r in zip(agents, rng.integers(lo, hi + 1, size=cfg.dropouts))]
+    else:
+        return {}
+    schedule: dict[int, tuple[int, ...]] = {}
+    for agent, round_ in pairs:
+        if not 0 <= agent < n_agents:
+            raise ConfigError(f"config field 'dropout_schedule': agent {agent} does not exist (0..{n_agents - 1})")
+        if round_ > horizon:
+            raise ConfigError(f"config field 'dropout_schedule'/'dropout_rounds': round {round_} is past the round "
+                              f"bound {horizon}; allowed: 1..{horizon}")
+        schedule[round_] = (*schedule.get(round_, ()), agent)
+    return schedule

@@ -39,6 +39,10 @@ TASK_FEATURES = (
     "distance",           # distance from the agent's start / arena diagonal
     "group_complete",     # L_j members in i's table
 )
+# only on a faulty network (lost or delayed messages, failing agents), where silence carries information
+FAULT_FEATURES = (
+    "member_silence",     # rounds since i last heard from or about its quietest fellow member / silence_timeout, ≤ 1
+)
 
 
 # bounds of the relative task position (÷ arena) and of the start distance (÷ arena diagonal): a task and an agent
@@ -77,14 +81,11 @@ class ObservationLayout:
 
     n_tasks: int
     n_equipment: int
+    task_names: tuple[str, ...] = TASK_FEATURES
 
     @property
     def own_names(self) -> tuple[str, ...]:
         return OWN_FEATURES + tuple(f"equipment_{e}" for e in range(self.n_equipment))
-
-    @property
-    def task_names(self) -> tuple[str, ...]:
-        return TASK_FEATURES
 
     @property
     def own_size(self) -> int:
@@ -92,14 +93,14 @@ class ObservationLayout:
 
     @property
     def task_size(self) -> int:
-        return len(TASK_FEATURES)
+        return len(self.task_names)
 
     @property
     def size(self) -> int:
         return self.own_size + self.n_tasks * self.task_size
 
     def task_column(self, name: str) -> int:
-        return TASK_FEATURES.index(name)
+        return self.task_names.index(name)
 
     def split(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(…, D) → own (…, own_size) and tasks (…, M, task_size)."""
@@ -135,7 +136,8 @@ class ObservationBuilder:
     def __init__(self, protocol: Protocol, max_agents_per_task: int, max_rounds: int) -> None:
         """``max_agents_per_task`` and ``max_rounds`` bound every instance the env can draw (for the space)."""
         s = protocol.scenario
-        self.layout = ObservationLayout(s.n_tasks, len(s.equipment_names))
+        names = TASK_FEATURES + (FAULT_FEATURES if protocol.cfg.faulty else ())
+        self.layout = ObservationLayout(s.n_tasks, len(s.equipment_names), names)
         self.low, self.high = self.layout.bounds(max_agents_per_task, max_rounds, s.n_agents)
         self.scales = Scales.of(s)
         self._static = self._static_task_features(protocol)
@@ -177,6 +179,11 @@ class ObservationBuilder:
         f[:, :, col("rounds_since_change")] = np.where(view.in_bundle, protocol.round - kn.assigned_at, 0)
         f[:, :, col("prereqs_met")] = view.prereqs_met
         f[:, :, col("group_complete")] = view.members == s.task_agents[None, :]
+        if "member_silence" in self.layout.task_names:
+            silence = (protocol.round - kn.timestamps) / protocol.silence_timeout               # (N, N)
+            np.fill_diagonal(silence, 0.0)
+            members = kn.bids > 0                                                               # (N, N, M)
+            f[:, :, col("member_silence")] = np.minimum(np.where(members, silence[:, :, None], 0.0).max(axis=1), 1.0)
         own = np.zeros((s.n_agents, self.layout.own_size))
         own[:, :3] = s.agent_pos / self.scales.arena
         own[:, 3] = s.agent_speed / self.scales.max_speed

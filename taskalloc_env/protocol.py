@@ -16,6 +16,7 @@ choice.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 
 import numpy as np
@@ -24,10 +25,10 @@ from taskalloc_env.allocation import Counters
 from taskalloc_env.bidding import BidView, bid_view
 from taskalloc_env.cbba_table import NONE
 from taskalloc_env.config import TaskAllocConfig, round_bound
-from taskalloc_env.consensus import Traffic, exchange
+from taskalloc_env.consensus import Snapshot, Traffic, exchange, snapshot
 from taskalloc_env.errors import ConfigError
 from taskalloc_env.knowledge import LocalKnowledge
-from taskalloc_env.network import CommGraph
+from taskalloc_env.network import CommGraph, dropout_schedule, make_network
 from taskalloc_env.scenario import Scenario
 from taskalloc_env.scoring import PathTable, Schedule, ScoringModel, TeamScore, team_score
 
@@ -74,9 +75,12 @@ def check_memory(n_agents: int, n_tasks: int, max_bundle: int | None, limit_gb: 
 class Protocol:
     """All agents' tables plus the rules that change them."""
 
-    def __init__(self, scenario: Scenario, cfg: TaskAllocConfig) -> None:
+    def __init__(self, scenario: Scenario, cfg: TaskAllocConfig, rng: np.random.Generator | None = None) -> None:
+        """``rng`` drives the network's faults and random drop-outs (the env hands in one spawned from its seeded
+        generator); without faults nothing is drawn from it."""
         self.scenario = scenario
         self.cfg = cfg
+        self.rng = rng if rng is not None else np.random.default_rng(0)
         self.model = ScoringModel.from_config(scenario, cfg)
         self.graph = CommGraph(scenario.agent_pos, cfg.comm_range, cfg.edge_rule)
         self.equipment = self.model.equipment
@@ -86,6 +90,7 @@ class Protocol:
         self.max_bundle = cfg.max_bundle or scenario.n_tasks
         self.max_rounds = cfg.max_rounds or round_bound(scenario.n_tasks, scenario.n_agents,
                                                         int(scenario.task_agents.max()), self.graph.diameter)
+        self.silence_timeout = cfg.silence_timeout or 2 * (self.graph.diameter + 1)
         self.reset()
 
     def reset(self) -> None:
@@ -94,6 +99,12 @@ class Protocol:
                                               know_everyone=not self.cfg.require_known_capacity)
         self.round = 0
         self.counters = Counters()
+        self.network = make_network(self.graph, self.cfg, self.rng)
+        self.alive = np.ones(s.n_agents, dtype=bool)
+        self.live_graph = self.graph
+        self.dropouts = dropout_schedule(self.cfg, s.n_agents, self.max_rounds, self.rng)
+        self.last_heard = np.zeros((s.n_agents, s.n_agents), dtype=np.int64)   # round i last received from k
+        self._snapshots: dict[int, Snapshot] = {}
         self.stable_rounds = 0
         self.converged = False
         self._paths = PathTable.empty(s.n_agents, s.n_tasks)
@@ -128,8 +139,12 @@ class Protocol:
     @property
     def schedules(self) -> list[Schedule]:
         """Every agent's path timing (computed on demand: the hot path keeps arrays only)."""
-        self._refresh_paths()
-        return self.model.plan(range(self.scenario.n_agents), self.knowledge.paths, gains=False).schedules
+        return self.model.plan(range(self.scenario.n_agents), self.flown_paths, gains=False).schedules
+
+    @property
+    def flown_paths(self) -> list[list[int]]:
+        """The paths that will be flown: a failed agent flies none."""
+        return [path if alive else [] for path, alive in zip(self.knowledge.paths, self.alive)]
 
     def view(self) -> BidView:
         """The bidding situation of every agent (cached until the next change)."""
@@ -146,7 +161,11 @@ class Protocol:
         """The team score of the allocation as it stands: each agent's own path (``scoring.team_score``)."""
         if self._score is None:
             self._refresh_paths()
-            self._score = team_score(self.model, self._paths, self.cfg.conflict_policy)
+            paths = self._paths
+            if not self.alive.all():
+                paths = dataclasses.replace(paths, members=paths.members & self.alive[:, None],
+                                            reward=paths.reward * self.alive[:, None], cost=paths.cost * self.alive)
+            self._score = team_score(self.model, paths, self.cfg.conflict_policy)
         return self._score
 
     # -- Phase 1 decisions ---------------------------------------------------------------------------------------
@@ -222,32 +241,84 @@ class Protocol:
 
     # -- Phase 2 and clean-up ------------------------------------------------------------------------------------
     def end_round(self) -> Traffic:
-        """Exchange, outbid release, quit timers and the convergence test (see the module docstring)."""
+        """Drop-outs, sending and delivery, silent agents, outbid release, quit timers and the convergence test."""
         kn = self.knowledge
         self.round += 1
+        self._fail_agents(self.dropouts.get(self.round, ()))
         before = kn.bids.copy()
-        traffic = exchange(kn, self.graph, self.round, self.scenario.task_agents, self.equipment,
+        own_before = kn.own_bids() > 0
+        snap = snapshot(kn, self.round)
+        self._snapshots[self.round] = snap
+        sent = self.network.send(self.round, np.flatnonzero(self.alive), snap.data_items)
+        deliveries = self.network.deliver(self.round, self.alive)
+        traffic = exchange(kn, deliveries, self._snapshots, self.round, self.scenario.task_agents, self.equipment,
                            self.cfg.cbba_table)
+        self.last_heard[deliveries.receiver, deliveries.sender] = self.round
+        oldest = min(self.network.in_flight(), default=self.round)
+        self._snapshots = {r: v for r, v in self._snapshots.items() if r >= oldest}
+        self._forget_silent()
+        c = self.counters
+        c.conflicting_bids += int((own_before & (kn.own_bids() <= 0) & self.alive[:, None]).sum())
         self._release_outbid()
         if self.cfg.task_quitting:
             self._reset_quit_timers(before)
         if kn.quit_blocked.any():          # another agent assigned itself to a quit task: the quitter may return
             joined = ((kn.bids > 0) & (before <= 0)).any(axis=1)
             kn.quit_blocked &= ~joined
-        c = self.counters
         c.rounds = self.round
         c.messages += traffic.messages
         c.informative_messages += traffic.informative
         c.data_items += traffic.data_items
+        c.messages_sent += sent.sent
+        c.messages_lost += sent.lost
+        c.messages_delayed += sent.delayed
+        c.data_items_sent += sent.data_items
         changed = not np.array_equal(kn.bids, self._last_bids) or kn.bundles != self._last_bundles
         if changed:                         # the state from here on is final if nothing changes again
             c.rounds_to_agreement, c.messages_to_agreement = self.round, c.messages
         self._last_bids = kn.bids.copy()
         self._last_bundles = [list(b) for b in kn.bundles]
         self.stable_rounds = 0 if changed or self._quit_pending() else self.stable_rounds + 1
-        self.converged = self.stable_rounds >= self.graph.diameter + 1
+        self.converged = self.stable_rounds >= self.live_graph.diameter + 1 and self._settled()
         self._touch()
         return traffic
+
+    def _settled(self) -> bool:
+        """Every live agent has heard each live neighbour since the last change, no older message is still
+        travelling, and no live agent still counts on a failed one (always true on perfect links, where everyone
+        hears everyone in every round and nobody fails)."""
+        if self.network.perfect and not self.dropouts:
+            return True
+        last_change = self.counters.rounds_to_agreement
+        links = self.live_graph.adjacency
+        heard = np.all((self.last_heard > last_change) | ~links)
+        counts_on_failed = bool((self.knowledge.bids[self.alive][:, ~self.alive] > 0).any())
+        return bool(heard) and not counts_on_failed and not np.any(self.network.in_flight() <= last_change)
+
+    def _fail_agents(self, agents: tuple[int, ...]) -> None:
+        """Agents that fail this round stop sending and receiving; their paths are no longer flown."""
+        if not agents:
+            return
+        self.alive[list(agents)] = False
+        self.live_graph = CommGraph(self.scenario.agent_pos, self.cfg.comm_range, self.cfg.edge_rule, self.alive)
+        self.counters.dropped_agents += len(agents)
+        self._touch()
+
+    def _forget_silent(self) -> None:
+        """A live agent that has heard nothing from or about k for ``silence_timeout`` rounds (its timestamp s_i[k],
+        relayed stamps included) takes k for lost and clears k's bids from its table, so k's tasks can be
+        re-assigned (Johnson §3.5: a synchronous scheme "stuck waiting for a message that was not going to arrive"
+        never converges; the timeout is our rule, ``silence_timeout``)."""
+        if self.network.perfect and not self.dropouts:
+            return
+        kn = self.knowledge
+        silent = (self.round - kn.timestamps > self.silence_timeout) & self.alive[:, None]
+        np.fill_diagonal(silent, False)
+        holders, gone = np.nonzero(silent & (kn.bids > 0).any(axis=2))
+        for i, k in zip(holders, gone):
+            for j in np.flatnonzero(kn.bids[i, k] > 0):
+                kn.set_bid(int(i), int(k), int(j), 0.0)
+            self.counters.silent_releases += 1
 
     def _release_outbid(self) -> None:
         """Release the first lost bundle task and everything after it (thesis §2.2.4; Johnson (3.11)–(3.12))."""
@@ -277,7 +348,7 @@ class Protocol:
 
     # -- agreement -------------------------------------------------------------------------------------------------
     def agreement(self) -> bool:
-        """Every pair of agents in one connected component holds the same table (the consensus of thesis §3.2.3)."""
+        """Every pair of live agents in one connected component holds the same table (thesis §3.2.3's consensus)."""
         bids = self.knowledge.bids
-        comp = self.graph.component
-        return all(np.array_equal(bids[i], bids[comp[i]]) for i in range(len(comp)))
+        comp = self.live_graph.component
+        return all(np.array_equal(bids[i], bids[comp[i]]) for i in np.flatnonzero(self.alive))

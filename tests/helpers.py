@@ -184,7 +184,7 @@ def run_episode(env: TaskAllocEnv, policy, seed: int | None, *, check: Callable[
     if check is not None:
         check(env)
     while env.agents:
-        actions = policy.act(observations, infos)
+        actions = policy.act({a: observations[a] for a in env.agents}, infos)
         for a, act in actions.items():
             if act > m:
                 quits[env.agent_index[a], act - m - 1] += 1

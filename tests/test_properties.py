@@ -88,7 +88,8 @@ def scenario_config(draw, *, limited_comms: bool = False, small: bool = False,
 
 
 def make_env(kw: dict, policy, **extra) -> TaskAllocEnv:
-    return TaskAllocEnv(**kw, **extra, **policy.env_overrides)
+    """float64 observations: these tests compare observed values with the spec's formulas to 1e-7."""
+    return TaskAllocEnv(**kw, **extra, **{"dtype": "float64", **policy.env_overrides})
 
 
 class StableBids:

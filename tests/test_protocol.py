@@ -18,7 +18,7 @@ from helpers import agent, build, check_tables, run_episode, task
 from policies import CBBAPolicy, CBGAPolicy, PassPolicy
 from taskalloc_env import TaskAllocConfig, TaskAllocEnv, generate
 from taskalloc_env.cbba_table import NONE
-from taskalloc_env.consensus import exchange
+from taskalloc_env.consensus import broadcast_round
 from taskalloc_env.groups import Equipment
 from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.network import CommGraph
@@ -470,14 +470,14 @@ def test_appendix_a1_cbba_consensus_steps():
     place(kn, A1, {T1: 73.98, T2: 71.56, T3: 72.44})            # Table A.1
     place(kn, A2, {T1: 71.98, T2: 71.56, T3: 72.44})            # Table A.2
     place(kn, A3, {T2: 72.44, T3: 72.44, T4: 73.6})             # A3's bids as they reach A2 (Table A.4)
-    exchange(kn, graph, 1, need, eq)
+    broadcast_round(kn, graph, 1, need, eq)
     assert single_view(kn, A1)[:4] == [(A1, 73.98), (A2, 71.56), (A2, 72.44), (NONE, 0.0)]    # Table A.3
     assert single_view(kn, A2)[:4] == [(A1, 73.98), (A3, 72.44), (A3, 72.44), (A3, 73.6)]     # Table A.4
     # second bundle phase: A1 releases T2, T3 and bids T5 = 67 (Table A.3); A2 bids T5 = 68.47 (Table A.4)
     place(kn, A1, {T5: 67.0})
     place(kn, A2, {T5: 68.47})
     assert single_view(kn, A1) == [(A1, 73.98), (A2, 71.56), (A2, 72.44), (NONE, 0.0), (A1, 67.0)]
-    exchange(kn, graph, 2, need, eq)
+    broadcast_round(kn, graph, 2, need, eq)
     assert single_view(kn, A1) == [(A1, 73.98), (A3, 72.44), (A3, 72.44), (A3, 73.6), (A2, 68.47)]
 
 
@@ -493,11 +493,11 @@ def test_appendix_a2_cbga_consensus_steps():
     place(kn, A1, {T1: 73.9, T2: 71.6, T3: 72.4})               # Table A.5
     place(kn, A2, {T1: 71.9, T2: 71.6, T3: 72.4})               # Table A.6
     place(kn, A3, {T2: 72.4, T3: 72.4, T4: 73.6})               # A3's row of Table A.8
-    exchange(kn, graph, 1, need, eq)
+    broadcast_round(kn, graph, 1, need, eq)
     table_a7 = [[73.9, 71.6, 72.4, 0, 0], [71.9, 71.6, 72.4, 0, 0], [0] * 5, [0] * 5]
     table_a8 = [[73.9, 0, 0, 0, 0], [71.9, 71.6, 72.4, 0, 0], [0, 72.4, 72.4, 73.6, 0], [0] * 5]
     assert multi_view(kn, A1) == table_a7
     assert multi_view(kn, A2) == table_a8
-    exchange(kn, graph, 2, need, eq)
+    broadcast_round(kn, graph, 2, need, eq)
     table_a9_without_t5 = [[73.9, 0, 0, 0, 0], [71.9, 71.6, 72.4, 0, 0], [0, 72.4, 72.4, 73.6, 0], [0] * 5]
     assert multi_view(kn, A1) == table_a9_without_t5

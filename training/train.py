@@ -225,7 +225,7 @@ def build_model(cfg: TrainConfig, venv: TaskAllocVecEnv) -> MaskablePPO | PPO:
         n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs, gamma=cfg.gamma,
         gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range, ent_coef=cfg.ent_coef, vf_coef=cfg.vf_coef,
         max_grad_norm=cfg.max_grad_norm, target_kl=cfg.target_kl, seed=cfg.seed, verbose=cfg.verbose,
-        device="cpu", policy_kwargs={"body": cfg.body, "hidden": cfg.hidden},
+        device="cpu", policy_kwargs={"body": cfg.body, "hidden": cfg.hidden, "task_size": layout(cfg).task_size},
         tensorboard_log=str(Path(cfg.log_dir) / "tb") if cfg.tensorboard else None,
     )
     return model
