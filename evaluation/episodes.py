@@ -41,12 +41,15 @@ from taskalloc_env.config import max_required_agents
 
 CENTRALISED = {"sgama": ("SGAMA", sgama), "exact": ("exact", exact)}
 METRICS = ("score", "valid_tasks", "conflicts", "rounds", "messages", "comm_steps", "rounds_to_agreement",
-           "comm_steps_to_agreement", "invalid_actions", "informative_messages",
-           "data_items", "bids", "quits")
+           "comm_steps_to_agreement", "invalid_actions", "informative_messages", "data_items", "bids", "quits",
+           "messages_lost", "messages_delayed", "data_received_per_agent", "data_sent_per_agent",
+           "data_per_assignment", "conflicting_bids_per_agent", "dropped_agents", "connected", "fully_connected")
 SUMMARY_FIELDS = ("score", "valid_tasks", "rounds", "messages")
 MAX_CHUNK = 16
 PROTOCOL_METRICS = ("rounds", "messages", "comm_steps", "rounds_to_agreement", "comm_steps_to_agreement",
-                    "invalid_actions", "informative_messages", "data_items", "quits")
+                    "invalid_actions", "informative_messages", "data_items", "quits", "messages_lost",
+                    "messages_delayed", "data_received_per_agent", "data_sent_per_agent", "data_per_assignment",
+                    "conflicting_bids_per_agent", "dropped_agents")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -136,6 +139,16 @@ def run_episode(episode: Episode) -> dict[str, Any]:
     n_agents = episode.config.n_agents
     figures["comm_steps"] = figures["messages"] / n_agents
     figures["comm_steps_to_agreement"] = figures["messages_to_agreement"] / n_agents
+    # data volume (thesis §4.3, Figs 4.8–4.10): items received and sent per agent, received per assignment (an
+    # agent on a valid task), and bids later replaced by a better one per agent
+    figures["data_received_per_agent"] = figures["data_items"] / n_agents
+    figures["data_sent_per_agent"] = figures["data_items_sent"] / n_agents
+    assignments = sum(len(allocation.members[j]) for j in allocation.valid_tasks)
+    figures["data_per_assignment"] = figures["data_items"] / assignments if assignments else None
+    figures["conflicting_bids_per_agent"] = figures["conflicting_bids"] / n_agents
+    graph = env.unwrapped.protocol.graph
+    figures["connected"] = bool((graph.component == 0).all())
+    figures["fully_connected"] = bool(graph.adjacency.sum() == n_agents * (n_agents - 1))
     if key in CENTRALISED:
         figures.update(dict.fromkeys(PROTOCOL_METRICS))
     return {**dict(episode.labels), "solver": solver_name(episode.solver), "seed": episode.seed,

@@ -26,10 +26,16 @@ METRIC_LABELS = {
     "messages": "messages", "comm_steps": "comm steps / agent", "informative_messages": "informative msgs",
     "data_items": "data items", "bids": "bids", "quits": "quits", "rounds_to_agreement": "rounds to agreement",
     "comm_steps_to_agreement": "comm steps / agent to agreement", "invalid_actions": "invalid actions",
+    "messages_lost": "messages lost", "messages_delayed": "messages delayed",
+    "data_received_per_agent": "data items received / agent", "data_sent_per_agent": "data items sent / agent",
+    "data_per_assignment": "data items / assignment", "conflicting_bids_per_agent": "conflicting bids / agent",
+    "dropped_agents": "failed agents", "connected": "connected network", "fully_connected": "fully connected",
 }
 METRIC_DIGITS = {"score": 0, "valid_tasks": 1, "conflicts": 1, "rounds": 1, "messages": 0, "comm_steps": 1,
                  "informative_messages": 0, "data_items": 0, "bids": 0, "quits": 1, "rounds_to_agreement": 1,
-                 "comm_steps_to_agreement": 1, "invalid_actions": 1}
+                 "comm_steps_to_agreement": 1, "invalid_actions": 1, "messages_lost": 0, "messages_delayed": 0,
+                 "data_received_per_agent": 0, "data_sent_per_agent": 0, "data_per_assignment": 0,
+                 "conflicting_bids_per_agent": 2, "dropped_agents": 2, "connected": 2, "fully_connected": 2}
 
 
 def values(rows: Iterable[Mapping[str, Any]], metric: str) -> np.ndarray:

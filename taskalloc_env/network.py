@@ -39,7 +39,7 @@ from taskalloc_env.errors import ConfigError
 
 
 class CommGraph:
-    """Symmetric graph without self-loops; neighbours of each agent in ascending id order."""
+    """Symmetric graph without self-loops: its links, degrees, hop distances, diameter and components."""
 
     def __init__(self, positions: np.ndarray, comm_range: float | None = None, edge_rule: str = "dist",
                  alive: np.ndarray | None = None) -> None:
@@ -55,7 +55,6 @@ class CommGraph:
             adjacency &= alive[:, None] & alive[None, :]
         self.adjacency = adjacency
         self.adjacency.setflags(write=False)
-        self.neighbours = [np.flatnonzero(adjacency[i]) for i in range(n)]
         self.degree = adjacency.sum(axis=1)
         graph = csr_array(adjacency)
         # breadth-first search from every agent: O(N · links), not the O(N³) of boolean matrix powers
@@ -67,12 +66,6 @@ class CommGraph:
         lowest = np.full(labels.max(initial=-1) + 1, n)
         np.minimum.at(lowest, labels, np.arange(n))
         self.component = lowest[labels]          # component label per agent: the lowest id in its component
-        # inbox position t of every receiver with more than t neighbours, for vectorised rounds
-        self.inbox = []
-        for t in range(int(self.degree.max(initial=0))):
-            receivers = np.flatnonzero(self.degree > t)
-            senders = np.array([self.neighbours[i][t] for i in receivers], dtype=np.int64)
-            self.inbox.append((receivers, senders))
 
     @property
     def n_agents(self) -> int:
