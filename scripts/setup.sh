@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Create .venv and install the project with its training and test extras.
+# Create .venv and install the project with its training and test extras, and the libraries whose recipes in
+# docs/integrations.md run as tests (the integrations extra: SuperSuit, TorchRL, Tianshou).
 #
 # Torch goes in first, pinned, because a bare "torch" requirement pulls a CUDA build of several GB; pyproject.toml
 # keeps a range this pin satisfies, so pip installs nothing more for it. Choose where it comes from with:
@@ -21,7 +22,7 @@ if ! .venv/bin/python -c "import torch" 2>/dev/null; then
     .venv/bin/python -m pip install --quiet "torch==$TORCH_VERSION"
   fi
 fi
-.venv/bin/python -m pip install --quiet -e ".[train,dev]"
+.venv/bin/python -m pip install --quiet -e ".[train,dev,integrations]"
 cuda=$(.venv/bin/python -m pip list --format=freeze 2>/dev/null | grep -i '^nvidia-' || true)
 if [ -n "$cuda" ]; then
   echo "setup: CUDA packages were installed (a CUDA build of torch?):" >&2

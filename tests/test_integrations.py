@@ -35,6 +35,13 @@ def test_sb3_ppo_and_maskable_ppo_train_on_supersuit():
 
 
 @pytest.mark.slow
+def test_maskable_ppo_trains_on_the_projects_own_vec_env():
+    pytest.importorskip("sb3_contrib")
+    result = recipe("sb3_taskalloc_vec_env").main(steps=512)
+    assert result["MaskablePPO"] == 512 and result["episodes"] > 0
+
+
+@pytest.mark.slow
 def test_torchrl_checks_specs_and_rolls_out_batched():
     pytest.importorskip("torchrl")
     shapes = recipe("torchrl_wrapper").main(steps=40)
