@@ -24,6 +24,7 @@ import dataclasses
 
 import numpy as np
 
+from taskalloc_env import kernels
 from taskalloc_env.cbba_table import NONE, RESET, UPDATE, decide
 from taskalloc_env.group_merge import merge
 from taskalloc_env.groups import Equipment
@@ -42,19 +43,17 @@ class Snapshot:
     stamps: np.ndarray          # (N, N)
     known: np.ndarray           # (N, N): the agents each message names (its timestamps cover every agent it knows,
                                 #         its triples name only known agents; thesis §4.2.2, Table 4.5)
-
-    @property
-    def data_items(self) -> np.ndarray:
-        """(N,) items of each agent's message: 3 per positive table entry plus N_n timestamps (thesis §4.3)."""
-        return 3 * (self.bids > 0).sum(axis=(1, 2)) + self.bids.shape[0]
+    data_items: np.ndarray      # (N,) items of each message: 3 per positive table entry + N_n timestamps (thesis §4.3)
 
 
 def snapshot(knowledge: LocalKnowledge, now: int) -> Snapshot:
     """The messages of round ``now``: each agent stamps itself with T, then copies its table."""
     kn = knowledge
-    agents = np.arange(kn.bids.shape[0])
-    kn.timestamps[agents, agents] = now
-    return Snapshot(now, kn.bids.copy(), kn.winner.copy(), kn.winning_bid(), kn.timestamps.copy(), kn.known.copy())
+    n = kn.bids.shape[0]
+    kn.timestamps[np.arange(n), np.arange(n)] = now
+    bids = kn.bids.copy()
+    return Snapshot(now, bids, kn.winner.copy(), kn.winning_bid(), kn.timestamps.copy(), kn.known.copy(),
+                    3 * (bids > 0).sum(axis=(1, 2)) + n)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,7 +67,33 @@ class Traffic:
 
 def exchange(knowledge: LocalKnowledge, deliveries: Deliveries, snapshots: dict[int, Snapshot], now: int,
              required_agents: np.ndarray, equipment: Equipment, table: str = "canonical") -> Traffic:
-    """Process the messages of ``deliveries`` (sent in the rounds of ``snapshots``) on the receivers' tables."""
+    """Process the messages of ``deliveries`` (sent in the rounds of ``snapshots``) on the receivers' tables: in
+    compiled loops (``kernels.exchange_all``) when numba is there, else with ``exchange_reference``."""
+    if not kernels.COMPILED:
+        return exchange_reference(knowledge, deliveries, snapshots, now, required_agents, equipment, table)
+    if not len(deliveries):             # nothing arrives; every agent still stamps itself with T
+        np.fill_diagonal(knowledge.timestamps, now)
+        return Traffic(messages=0, informative=0, data_items=0)
+    kn = knowledge
+    sent = sorted({int(r) for r in deliveries.sent})
+    slot = np.searchsorted(np.array(sent, dtype=np.int64), deliveries.sent)
+    stack = [snapshots[r] for r in sent]
+
+    def stacked(name: str) -> np.ndarray:
+        arrays = [getattr(snap, name) for snap in stack]
+        return arrays[0][None] if len(arrays) == 1 else np.stack(arrays)
+
+    informative = kernels.exchange_all(
+        kn.bids, kn.winner, kn.timestamps, kn.known, stacked("bids"), stacked("winner"), stacked("winning_bid"),
+        stacked("stamps"), stacked("known"), deliveries.receiver, deliveries.sender, slot, float(now), kn.single,
+        required_agents, equipment.restricted, equipment.required, equipment.agent, table == "canonical")
+    items = sum(int(snap.data_items[deliveries.sender[slot == q]].sum()) for q, snap in enumerate(stack))
+    return Traffic(messages=len(deliveries), informative=int(informative), data_items=items)
+
+
+def exchange_reference(knowledge: LocalKnowledge, deliveries: Deliveries, snapshots: dict[int, Snapshot], now: int,
+                       required_agents: np.ndarray, equipment: Equipment, table: str = "canonical") -> Traffic:
+    """``exchange`` in numpy, vectorised over the receivers at each inbox position (the reference)."""
     kn = knowledge
     n = kn.bids.shape[0]
     agents = np.arange(n)

@@ -38,7 +38,6 @@ return equals ``evaluate().score / reward_scale``.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, ClassVar
@@ -324,10 +323,7 @@ class TaskAllocEnv(ParallelEnv):
 
     def evaluate(self) -> Allocation:
         """The allocation as it stands: paths with start times, groups, valid tasks, conflicts, score, traffic."""
-        p = self.protocol
-        return Allocation.from_paths(p.model, p.flown_paths, self.config.conflict_policy, schedules=p.schedules,
-                                     counters=dataclasses.replace(p.counters), converged=p.converged,
-                                     agreement=p.agreement())
+        return self.protocol.allocation()
 
     def render(self):
         if self.render_mode is None:

@@ -21,7 +21,7 @@ import os
 
 import numpy as np
 
-from taskalloc_env.allocation import Counters
+from taskalloc_env.allocation import Allocation, Counters
 from taskalloc_env.bidding import BidView, bid_view
 from taskalloc_env.cbba_table import NONE
 from taskalloc_env.config import TaskAllocConfig, round_bound
@@ -345,6 +345,12 @@ class Protocol:
         if not self.cfg.task_quitting:
             return False
         return bool(np.any(self._quittable() & (self.round - 1 - self.knowledge.assigned_at <= self.cfg.delta)))
+
+    def allocation(self) -> Allocation:
+        """The allocation as it stands: flown paths with start times, groups, validity, score, the run's figures."""
+        return Allocation.from_paths(self.model, self.flown_paths, self.cfg.conflict_policy, schedules=self.schedules,
+                                     counters=dataclasses.replace(self.counters), converged=self.converged,
+                                     agreement=self.agreement())
 
     # -- agreement -------------------------------------------------------------------------------------------------
     def agreement(self) -> bool:

@@ -1,0 +1,66 @@
+"""Solve an instance with a scripted consensus policy through the protocol directly, without the environment.
+
+``solve(scenario, config, "cbgabi")`` makes exactly the calls an episode of ``TaskAllocEnv`` makes — every step each
+agent still in the bundle phase decides from the same bid view, bids and quits are applied in agent order, the round
+ends when every agent has passed (``sync``) or after every step (``every_step``) — and the policy decides with the
+same rule on the same values (``CBGAPolicy.choose`` on the observation's columns, in the env's ``dtype``). It skips
+what an episode computes only for its caller: observations, rewards and infos. So it returns the same ``Allocation``,
+counters included, as ``rollout``; the experiments use it for the scripted baselines (a test compares the two on many
+seeds).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from policies.registry import make_policy
+from policies.scripted import CBGAPolicy
+from taskalloc_env.allocation import Allocation
+from taskalloc_env.config import TaskAllocConfig
+from taskalloc_env.observation import Scales
+from taskalloc_env.protocol import Protocol
+from taskalloc_env.scenario import Scenario
+
+PASS = 0
+
+
+def solve(scenario: Scenario, config: TaskAllocConfig, policy: str | CBGAPolicy, *, dtype: str = "float32",
+          max_cycles: int | None = None) -> Allocation:
+    """The allocation ``rollout`` reaches with ``policy`` on ``scenario`` in an env of ``config`` (and ``dtype``,
+    ``max_cycles``), with the policy's ``env_overrides`` applied as a runner applies them."""
+    policy = make_policy(policy) if isinstance(policy, str) else policy
+    if not isinstance(policy, CBGAPolicy):
+        raise ValueError(f"the direct solver runs the scripted consensus policies (CBBA, CBGA and variants), "
+                         f"not {policy!r}")
+    config = config.replace(**policy.env_overrides) if policy.env_overrides else config
+    if config.faulty:
+        raise ValueError("the direct solver needs perfect links: a faulty network draws from the env's generator")
+    protocol = Protocol(scenario, config)
+    unit, float_type = Scales.of(scenario).reward_unit, np.dtype(dtype)
+    m = scenario.n_tasks
+    passed = np.zeros(scenario.n_agents, dtype=bool)
+    steps = 0
+    while True:
+        view, quits = protocol.view(), protocol.quit_options()
+        acting = np.flatnonzero(~passed)
+        mask = np.zeros((len(acting), 1 + 2 * m), dtype=bool)
+        mask[:, 0] = True
+        mask[:, 1: m + 1] = view.can_bid[acting]
+        mask[:, m + 1:] = quits[acting]
+        columns = [(getattr(view, name)[acting] / unit).astype(float_type)
+                   for name in ("gain", "group_total", "displaced_bid")]
+        for i, action in zip(acting, policy.choose(mask, *columns).tolist()):
+            if action == PASS:
+                passed[i] = True
+            elif action <= m:
+                protocol.bid(int(i), action - 1, view=view)
+            else:
+                protocol.quit(int(i), action - m - 1)
+        steps += 1
+        if config.consensus == "every_step" or passed.all():
+            protocol.end_round()
+            passed = ~protocol.alive
+        if protocol.converged or (max_cycles is not None and steps >= max_cycles) \
+                or protocol.round >= protocol.max_rounds:
+            break
+    return protocol.allocation()

@@ -1,0 +1,77 @@
+"""The compiled kernels give exactly what their numpy references give, on random inputs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from taskalloc_env import kernels
+from taskalloc_env.consensus import Snapshot, exchange, exchange_reference
+from taskalloc_env.groups import Equipment
+from taskalloc_env.knowledge import LocalKnowledge
+from taskalloc_env.network import Deliveries
+
+pytestmark = pytest.mark.skipif(not kernels.COMPILED, reason="numba is not installed")
+
+
+@st.composite
+def rounds(draw):
+    """Random tables, a random snapshot (or two, for delayed messages) and random deliveries."""
+    n, m = draw(st.integers(2, 6)), draw(st.integers(1, 6))
+    single = np.array([draw(st.booleans()) for _ in range(m)])
+    need = np.where(single, 1, [draw(st.integers(2, 3)) for _ in range(m)])
+    typed = draw(st.booleans())
+    agent_eq = np.zeros((n, 2), dtype=bool)
+    task_eq = np.zeros((m, 2), dtype=np.int64)
+    if typed:
+        agent_eq[np.arange(n), [draw(st.integers(0, 1)) for _ in range(n)]] = True
+        for j in np.flatnonzero(~single):
+            if draw(st.booleans()):
+                for _ in range(need[j]):
+                    task_eq[j, draw(st.integers(0, 1))] += 1
+    values = st.sampled_from([0.0, 0.0, 10.0, 20.0, 20.0, 35.0])
+
+    def table() -> LocalKnowledge:
+        kn = LocalKnowledge.empty(n, m, single, know_everyone=draw(st.booleans()))
+        for i in range(n):
+            for j in range(m):
+                holders = [k for k in range(n) if draw(values) > 0][: need[j]]
+                for k in holders:
+                    kn.set_bid(i, k, j, draw(values) or 5.0)
+            kn.timestamps[i] = [draw(st.integers(0, 4)) for _ in range(n)]
+            kn.known[i, i] = True
+        return kn
+
+    receiver_kn = table()
+    senders = [table() for _ in range(draw(st.integers(1, 2)))]
+    snaps = {}
+    for r, kn in enumerate(senders, start=1):
+        snaps[r] = Snapshot(r, kn.bids.copy(), kn.winner.copy(), kn.winning_bid(), kn.timestamps.copy(),
+                            kn.known.copy(), 3 * (kn.bids > 0).sum(axis=(1, 2)) + n)
+    pairs = [(i, k) for i in range(n) for k in range(n) if i != k and draw(st.booleans())]
+    sent = np.array([draw(st.integers(1, len(senders))) for _ in pairs], dtype=np.int64)
+    rec = np.array([i for i, _ in pairs], dtype=np.int64)
+    snd = np.array([k for _, k in pairs], dtype=np.int64)
+    deliveries = Deliveries.of(rec, snd, sent)
+    return receiver_kn, snaps, deliveries, need, Equipment(agent_eq, task_eq), draw(st.sampled_from(["canonical",
+                                                                                                       "thesis"]))
+
+
+def clone(kn: LocalKnowledge) -> LocalKnowledge:
+    return LocalKnowledge(kn.bids.copy(), kn.winner.copy(), kn.timestamps.copy(), kn.known.copy(),
+                          [list(b) for b in kn.bundles], [list(p) for p in kn.paths], kn.assigned_at.copy(),
+                          kn.quit.copy(), kn.quit_blocked.copy(), kn.single.copy())
+
+
+@settings(max_examples=300, deadline=None)
+@given(rounds())
+def test_compiled_exchange_equals_the_reference(case):
+    kn, snaps, deliveries, need, equipment, table = case
+    compiled, reference = clone(kn), clone(kn)
+    got = exchange(compiled, deliveries, snaps, 9, need, equipment, table)
+    want = exchange_reference(reference, deliveries, snaps, 9, need, equipment, table)
+    assert got == want
+    for name in ("bids", "winner", "timestamps", "known"):
+        np.testing.assert_array_equal(getattr(compiled, name), getattr(reference, name), err_msg=name)
