@@ -28,6 +28,7 @@ from taskalloc_env import kernels
 from taskalloc_env.cbba_table import NONE, RESET, UPDATE, decide
 from taskalloc_env.group_merge import merge
 from taskalloc_env.groups import Equipment
+from taskalloc_env.kernels.merge import exchange_all
 from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.network import CommGraph, Deliveries
 
@@ -83,7 +84,7 @@ def exchange(knowledge: LocalKnowledge, deliveries: Deliveries, snapshots: dict[
         arrays = [getattr(snap, name) for snap in stack]
         return arrays[0][None] if len(arrays) == 1 else np.stack(arrays)
 
-    informative = kernels.exchange_all(
+    informative = exchange_all(
         kn.bids, kn.winner, kn.timestamps, kn.known, stacked("bids"), stacked("winner"), stacked("winning_bid"),
         stacked("stamps"), stacked("known"), deliveries.receiver, deliveries.sender, slot, float(now), kn.single,
         required_agents, equipment.restricted, equipment.required, equipment.agent, table == "canonical")

@@ -29,8 +29,10 @@ from typing import Any
 
 import numpy as np
 
+from taskalloc_env import kernels
 from taskalloc_env.config import TaskAllocConfig
 from taskalloc_env.groups import Equipment
+from taskalloc_env.kernels.plan import plan_paths
 from taskalloc_env.scenario import Scenario
 
 
@@ -104,7 +106,27 @@ class ScoringModel:
         return plan.gain[0], plan.slot[0]
 
     def plan(self, agents: Sequence[int], paths: Sequence[Sequence[int]], gains: bool = True) -> Plan:
-        """Schedules of ``paths`` and, with ``gains``, c_ij and n_ij (3.11) of every (agent, task), in one pass.
+        """Schedules of ``paths`` and, with ``gains``, c_ij and n_ij (3.11) of every (agent, task), in one pass:
+        compiled (``kernels.plan.plan_paths``) when numba is there, else ``plan_reference``."""
+        if not kernels.COMPILED:
+            return self.plan_reference(agents, paths, gains)
+        s = self.scenario
+        agents = np.asarray(agents, dtype=np.int64)
+        padded, lengths, _ = _pad(paths)
+        count, width = padded.shape
+        arrival, start, finish, reward, cost = (np.zeros((count, width)) for _ in range(5))
+        feasible = np.ones(count, dtype=bool)
+        gain = np.zeros((count, s.n_tasks))
+        slot = np.full((count, s.n_tasks), -1, dtype=np.int64)
+        plan_paths(padded, lengths, s.agent_speed[agents].astype(float), self.dist_agent_task[agents],
+                   self.dist_task_task, self.earliest, self.deadline, self.doable, s.task_duration, s.task_start,
+                   self.pay, float(self.lam), float(self.gamma), self.distance_cost == "leg",
+                   self.reward_time == "arrival", self.marginal_gain == "frozen", gains,
+                   arrival, start, finish, reward, cost, feasible, gain, slot)
+        return Plan(Timing(padded, lengths, arrival, start, finish, reward, cost, feasible), gain, slot)
+
+    def plan_reference(self, agents: Sequence[int], paths: Sequence[Sequence[int]], gains: bool = True) -> Plan:
+        """``plan`` in numpy, vectorised over (agent, slot, task) blocks (the reference).
 
         Paths are padded to a common length P. Timing runs one vectorised step per path position. Gains need no
         loop: inserting j at slot n delays the later tasks; with D the arrival delay at p_n and w_r = st_r − arr_r
@@ -113,13 +135,8 @@ class ScoringModel:
         """
         s = self.scenario
         agents = np.asarray(agents, dtype=np.int64)
-        count = len(agents)
-        lengths = np.array([len(p) for p in paths], dtype=np.int64)
-        width = int(lengths.max(initial=0))
-        padded = np.zeros((count, width), dtype=np.int64)
-        present = np.arange(width)[None, :] < lengths[:, None]
-        for a, path in enumerate(paths):
-            padded[a, : lengths[a]] = path
+        padded, lengths, present = _pad(paths)
+        count, width = padded.shape
         speed = s.agent_speed[agents]
         from_start = self.dist_agent_task[agents]                                        # (A, M)
         # timing (3.8)-(3.10), position by position
@@ -229,6 +246,17 @@ class ScoringModel:
             live, d = live[carry], slip[carry]
             offset += 1
         return fits, loss
+
+
+def _pad(paths: Sequence[Sequence[int]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Paths as a zero-padded (A, P) array, their lengths (A,) and the (A, P) mask of real entries."""
+    lengths = np.array([len(p) for p in paths], dtype=np.int64)
+    width = int(lengths.max(initial=0))
+    padded = np.zeros((len(paths), width), dtype=np.int64)
+    present = np.arange(width)[None, :] < lengths[:, None]
+    for a, path in enumerate(paths):
+        padded[a, : lengths[a]] = path
+    return padded, lengths, present
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Compiled kernels (numba) of the consensus hot loop; the numpy modules they mirror are the reference.
+"""The consensus merge of a round, compiled; ``consensus.exchange_reference`` (numpy) is the reference.
 
 ``exchange_all`` processes a round's deliveries one message at a time, exactly as ``consensus.exchange`` does with
 numpy — the CBBA decision table (``cbba_table.decide``) for single-agent tasks, the two-pass merge
@@ -6,33 +6,23 @@ numpy — the CBBA decision table (``cbba_table.decide``) for single-agent tasks
 the relayed timestamps of thesis (2.4) — but in compiled loops over the members of each column instead of whole
 (receivers × agents × tasks) blocks. Only comparisons and copies happen here, so its results are bit-identical to
 the reference; ``tests/test_kernels.py`` checks that on random tables.
-
-Without numba (``COMPILED`` false) the numpy reference runs instead.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-try:
-    import numba
-except ImportError:          # pragma: no cover - numba is a dependency; the reference still works without it
-    numba = None
+from taskalloc_env.kernels import jit
 
-COMPILED = numba is not None
 NONE = -1
 
 
-def _jit(function):
-    return numba.njit(cache=True, nogil=True)(function) if COMPILED else function
-
-
-@_jit
+@jit
 def _outbids(bid_a: float, agent_a: int, bid_b: float, agent_b: int) -> bool:
     return bid_a > bid_b or (bid_a == bid_b and agent_a > agent_b)
 
 
-@_jit
+@jit
 def _decide(i: int, k: int, z_i: int, y_i: float, z_k: int, y_k: float, s_i: np.ndarray, s_k: np.ndarray,
             canonical: bool) -> int:
     """``cbba_table.decide`` for one task: 0 leave, 1 update, 2 reset."""
@@ -63,7 +53,7 @@ def _decide(i: int, k: int, z_i: int, y_i: float, z_k: int, y_k: float, s_i: np.
     return 0
 
 
-@_jit
+@jit
 def _slot_open(column: np.ndarray, newcomer: int, required: np.ndarray, agent_eq: np.ndarray) -> bool:
     """``Equipment.slot_open`` for one column: the newcomer fills an item the members leave unmet."""
     for e in range(required.size):
@@ -77,7 +67,7 @@ def _slot_open(column: np.ndarray, newcomer: int, required: np.ndarray, agent_eq
     return False
 
 
-@_jit
+@jit
 def _replaceable(m: int, newcomer: int, required: np.ndarray, agent_eq: np.ndarray) -> bool:
     for e in range(required.size):  # noqa: SIM110 - compiled: an explicit loop, not a generator
         if required[e] > 0 and agent_eq[m, e] and agent_eq[newcomer, e]:
@@ -85,7 +75,7 @@ def _replaceable(m: int, newcomer: int, required: np.ndarray, agent_eq: np.ndarr
     return False
 
 
-@_jit
+@jit
 def _merge_column(out: np.ndarray, sent: np.ndarray, i: int, k: int, s_i: np.ndarray, s_k: np.ndarray,
                   need: int, restricted: bool, required: np.ndarray, agent_eq: np.ndarray) -> None:
     """``group_merge.merge`` for one column, in place on ``out`` (the receiver's column)."""
@@ -122,7 +112,7 @@ def _merge_column(out: np.ndarray, sent: np.ndarray, i: int, k: int, s_i: np.nda
             out[newcomer] = bid
 
 
-@_jit
+@jit
 def exchange_all(bids: np.ndarray, winner: np.ndarray, stamps: np.ndarray, known: np.ndarray,
                  snap_bids: np.ndarray, snap_winner: np.ndarray, snap_winning: np.ndarray, snap_stamps: np.ndarray,
                  snap_known: np.ndarray, receiver: np.ndarray, sender: np.ndarray, slot: np.ndarray, now: float,

@@ -1,0 +1,127 @@
+"""Path timing and insertion gains, compiled; ``scoring.ScoringModel.plan_reference`` (numpy) is the reference.
+
+``plan_paths`` replays (3.7)–(3.10) along each padded path, then evaluates every insertion (agent, slot, task) of
+(3.11) with the same arithmetic, in the same order, as the reference: the delay D that an insertion at slot n
+causes, its absorption by the waiting time of later tasks, and the reward those tasks lose (thesis §3.2.2). The
+reference evaluates whole (agents × slots × tasks) blocks and then masks; here each insertion stops as soon as it
+is known to be infeasible or unprofitable, which is where the time goes in the reference.
+
+The one difference is the exponential: numpy's ``exp``/``expm1`` use SIMD code on CPUs with AVX-512, which can
+differ from the C library's (called here) in the last bit. ``tests/test_kernels.py`` compares within 1e-12
+relative, and the allocations on random scenarios exactly (``docs/decisions.md``, "compiled kernels").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from taskalloc_env.kernels import jit
+
+
+@jit
+def _lateness(arrival: float, start: float, task_start: float, arrival_time: bool) -> float:
+    """τ − start_j of (3.8): max(arrival − start_j, 0), or start − start_j for ``reward_time="start"``."""
+    if arrival_time:
+        return max(arrival - task_start, 0.0)
+    return start - task_start
+
+
+@jit
+def plan_paths(padded: np.ndarray, lengths: np.ndarray, speed: np.ndarray, from_start: np.ndarray,
+               dist: np.ndarray, earliest: np.ndarray, deadline: np.ndarray, doable: np.ndarray,
+               duration: np.ndarray, task_start: np.ndarray, pay: np.ndarray, lam: float, gamma: float,
+               leg_cost: bool, arrival_time: bool, frozen: bool, gains: bool,
+               arrival: np.ndarray, start: np.ndarray, finish: np.ndarray, reward: np.ndarray, cost: np.ndarray,
+               feasible: np.ndarray, gain: np.ndarray, slot: np.ndarray) -> None:
+    """Fill the (A, P) timing arrays, ``feasible`` (A,) and, with ``gains``, c_ij and n_ij (A, M) in place.
+
+    ``from_start`` (A, M) is each agent's distance to every task; ``dist`` (M, M) between tasks. Padding entries of
+    the timing arrays stay zero.
+    """
+    count, m = from_start.shape
+    leg = np.zeros(padded.shape[1])
+    for a in range(count):
+        t = 0.0
+        ok_path = True
+        length = lengths[a]
+        for r in range(length):                                  # (3.7)–(3.10) along the path
+            j = padded[a, r]
+            leg[r] = from_start[a, j] if r == 0 else dist[padded[a, r - 1], j]
+            arrival[a, r] = t + leg[r] / speed[a]
+            start[a, r] = max(arrival[a, r], earliest[j])
+            finish[a, r] = start[a, r] + duration[j]
+            reward[a, r] = pay[j] * np.exp(-lam * _lateness(arrival[a, r], start[a, r], task_start[j], arrival_time))
+            cost[a, r] = gamma * (leg[r] if leg_cost else from_start[a, j])
+            if not (arrival[a, r] < deadline[j] and doable[j]):
+                ok_path = False
+            t = finish[a, r]
+        feasible[a] = ok_path
+        if not gains:
+            continue
+        for j in range(m):                                       # (3.11): the best feasible insertion of j
+            best = -np.inf
+            best_slot = 0
+            on_path = False
+            for r in range(length):
+                if padded[a, r] == j:
+                    on_path = True
+            for n in range(length + 1):
+                free = 0.0 if n == 0 else finish[a, n - 1]
+                to_task = from_start[a, j] if n == 0 else dist[padded[a, n - 1], j]
+                arrive = free + to_task / speed[a]
+                begin = max(arrive, earliest[j])
+                if not (arrive < deadline[j] and doable[j]):
+                    continue
+                value = pay[j] * np.exp(-lam * _lateness(arrive, begin, task_start[j], arrival_time))
+                if leg_cost:
+                    detour = to_task
+                    if n < length:
+                        detour += dist[padded[a, n], j] - leg[n]
+                    value -= gamma * detour
+                else:
+                    value -= gamma * from_start[a, j]
+                if not value > 0:                                # later tasks can only lose
+                    continue
+                if n < length:
+                    nxt = padded[a, n]
+                    delay = begin + duration[j] + dist[nxt, j] / speed[a]
+                    delay = max(delay - arrival[a, n], 0.0)
+                    if frozen:                                   # nothing already planned may move
+                        fits = delay <= start[a, n] - arrival[a, n]
+                        if arrival_time:
+                            ahead = arrival[a, n] - task_start[nxt]
+                            fits = fits and (ahead + delay <= 0 or delay == 0)
+                        if not fits:
+                            continue
+                    else:                                        # push the delay down the path
+                        fits = True
+                        loss = 0.0
+                        d = delay
+                        for r in range(n, length):
+                            p = padded[a, r]
+                            late = d >= deadline[p] - arrival[a, r]
+                            if late:
+                                fits = False
+                            slip = d - (start[a, r] - arrival[a, r])
+                            if arrival_time:
+                                ahead = arrival[a, r] - task_start[p]
+                                later = max(ahead + d, 0.0) - max(ahead, 0.0)
+                            else:
+                                later = max(slip, 0.0)
+                            if later > 0:
+                                loss += reward[a, r] * np.expm1(-lam * later)
+                            if not (slip > 0) or late:
+                                break
+                            d = slip
+                        value += loss
+                        if not fits:
+                            continue
+                if value > best:
+                    best = value
+                    best_slot = n
+            if on_path or not best > 0:
+                gain[a, j] = 0.0
+                slot[a, j] = -1
+            else:
+                gain[a, j] = best
+                slot[a, j] = best_slot
