@@ -1,4 +1,4 @@
-"""Environment benchmarks: the marginal-gain kernel, env steps per second, time to converge.
+"""Environment benchmarks: the marginal-gain kernel, env steps per second, time to converge, network strategies.
 
     python -m benchmarks.bench_env            # full run (about a minute)
     python -m benchmarks.bench_env --quick    # a few seconds
@@ -7,7 +7,10 @@ Machines are noisy, so the kernel is compared with a naive per-insertion loop *i
 figure to quote). Convergence times are medians over seeds of a whole episode through the PettingZoo env with
 the scripted CBGA policy (observations, masks, rewards included); they are printed next to the reference figures
 quoted in the project's issue for a public pure-Python CBBA on these machines (0.16 s for 10 × 50, 1.4 s for
-20 × 100, time windows), with the load average so a busy machine is visible.
+20 × 100, time windows), with the load average so a busy machine is visible. The network strategies
+(``network.Network``: loss, bursts, delay, range, drop-outs) run the default scenario with CBGA on the same seeds,
+interleaved seed by seed so that a change in the machine's load hits every strategy alike, and are printed as ratios
+to ``perfect`` links: time per episode, rounds and messages.
 """
 
 from __future__ import annotations
@@ -25,6 +28,16 @@ from taskalloc_env.errors import run_cli
 from taskalloc_env.scoring import ScoringModel
 
 REFERENCE_SECONDS = {(10, 50): 0.16, (20, 100): 1.4}
+# the communication strategies of the default scenario: name -> config overrides (perfect first: the reference)
+STRATEGIES = {
+    "perfect": {},
+    "loss 20 %": {"message_loss": 0.2},
+    "bursts": {"loss_model": "gilbert_elliott"},
+    "delay 2": {"max_delay": 2},
+    "loss+delay": {"message_loss": 0.2, "max_delay": 2},
+    "range 2.5": {"comm_range": 2.5},
+    "2 drop-outs": {"dropouts": 2},
+}
 
 
 def naive_gains(model: ScoringModel, agent: int, path: list[int]) -> np.ndarray:
@@ -105,6 +118,32 @@ def bench_convergence(sizes: list[tuple[int, int, int]]) -> None:
               f"seeds, {statistics.median(rounds):.0f} rounds{versus}")
 
 
+def bench_strategies(seeds: int, scenario: str = "default", solver: str = "cbga") -> dict[str, dict[str, float]]:
+    """Time per episode, rounds and messages of every strategy on the same seeds; printed as ratios to perfect."""
+    policy = make_policy(solver)
+    envs = {name: TaskAllocEnv(scenario, **overrides, **policy.env_overrides) for name, overrides in STRATEGIES.items()}
+    times = {name: [] for name in STRATEGIES}
+    rounds = {name: [] for name in STRATEGIES}
+    messages = {name: [] for name in STRATEGIES}
+    for seed in range(seeds):
+        for name, env in envs.items():         # interleaved: load changes hit every strategy alike
+            t0 = time.perf_counter()
+            allocation = rollout(env, policy, seed=seed)
+            times[name].append(time.perf_counter() - t0)
+            rounds[name].append(allocation.counters.rounds)
+            messages[name].append(allocation.counters.messages)
+    figures = {name: {"seconds": statistics.mean(times[name]), "rounds": statistics.mean(rounds[name]),
+                      "messages": statistics.mean(messages[name])} for name in STRATEGIES}
+    base = figures["perfect"]
+    print(f"network strategies, scenario {scenario}, {solver.upper()}, {seeds} seeds (mean per episode; x = ratio "
+          "to perfect):")
+    for name, f in figures.items():
+        print(f"  {name:12s} {1e3 * f['seconds']:7.1f} ms (x{f['seconds'] / base['seconds']:.2f})  "
+              f"{f['rounds']:5.1f} rounds (x{f['rounds'] / base['rounds']:.2f})  "
+              f"{f['messages']:6.0f} messages (x{f['messages'] / base['messages']:.2f})")
+    return figures
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="a few seconds: fewer repeats, no 100 x 500")
@@ -114,6 +153,7 @@ def main(argv: list[str] | None = None) -> None:
     bench_steps(seconds=1.0 if args.quick else 5.0)
     sizes = [(10, 50, 5), (20, 100, 2)] if args.quick else [(10, 50, 50), (20, 100, 10), (100, 500, 2)]
     bench_convergence(sizes)
+    bench_strategies(seeds=5 if args.quick else 40)
 
 
 if __name__ == "__main__":

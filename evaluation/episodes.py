@@ -43,13 +43,14 @@ CENTRALISED = {"sgama": ("SGAMA", sgama), "exact": ("exact", exact)}
 METRICS = ("score", "valid_tasks", "conflicts", "rounds", "messages", "comm_steps", "rounds_to_agreement",
            "comm_steps_to_agreement", "invalid_actions", "informative_messages", "data_items", "bids", "quits",
            "messages_lost", "messages_delayed", "data_received_per_agent", "data_sent_per_agent",
-           "data_per_assignment", "conflicting_bids_per_agent", "dropped_agents", "connected", "fully_connected")
+           "data_per_assignment", "data_per_agent_per_assignment", "conflicting_bids_per_agent", "dropped_agents",
+           "connected", "fully_connected")
 SUMMARY_FIELDS = ("score", "valid_tasks", "rounds", "messages")
 MAX_CHUNK = 16
 PROTOCOL_METRICS = ("rounds", "messages", "comm_steps", "rounds_to_agreement", "comm_steps_to_agreement",
                     "invalid_actions", "informative_messages", "data_items", "quits", "messages_lost",
                     "messages_delayed", "data_received_per_agent", "data_sent_per_agent", "data_per_assignment",
-                    "conflicting_bids_per_agent", "dropped_agents")
+                    "data_per_agent_per_assignment", "conflicting_bids_per_agent", "dropped_agents")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -139,12 +140,15 @@ def run_episode(episode: Episode) -> dict[str, Any]:
     n_agents = episode.config.n_agents
     figures["comm_steps"] = figures["messages"] / n_agents
     figures["comm_steps_to_agreement"] = figures["messages_to_agreement"] / n_agents
-    # data volume (thesis §4.3, Figs 4.8–4.10): items received and sent per agent, received per assignment (an
-    # agent on a valid task), and bids later replaced by a better one per agent
+    # data volume (thesis §4.3, Figs 4.8–4.10): items received and sent per agent, received per assignment made (an
+    # agent on a valid task), received per agent per assignment required (Σ_j L_j: thesis Fig 4.9, "the number of
+    # assignments to reach a consensus is equal to Σ L_j"), and bids later replaced by a better one per agent
     figures["data_received_per_agent"] = figures["data_items"] / n_agents
     figures["data_sent_per_agent"] = figures["data_items_sent"] / n_agents
     assignments = sum(len(allocation.members[j]) for j in allocation.valid_tasks)
     figures["data_per_assignment"] = figures["data_items"] / assignments if assignments else None
+    required = int(env.unwrapped.scenario.task_agents.sum())
+    figures["data_per_agent_per_assignment"] = figures["data_received_per_agent"] / required
     figures["conflicting_bids_per_agent"] = figures["conflicting_bids"] / n_agents
     graph = env.unwrapped.protocol.graph
     figures["connected"] = bool((graph.component == 0).all())

@@ -19,7 +19,11 @@ fields), ``sweep`` (``{field, values, label}`` or ``{points: [mapping…], x, la
 it), ``series`` (solver names or ``{solver, label, overrides}``), ``baseline`` (a series label), ``metrics``,
 ``episodes``, ``headline`` (points to tabulate and bar-plot in the docs), ``published`` (markdown),
 ``checks`` (``{claim, a, b, test: greater|less|same|ratio_above|ratio_below, metric, at, alpha, ratio}``),
-``quick`` (``{points: [...], episodes}``).
+``quick`` (``{points: [...], episodes}``), ``marks`` (``[{metric, share, label}]``: a vertical line in every sweep
+plot at the first point where at least ``share`` of the episodes have the yes/no ``metric``, e.g. where the network
+becomes connected, thesis Figs 4.6–4.7), ``reference`` (``{point, metrics}``: every series at every point paired
+against the same series at the reference point on the same seeds — Δ with its 95 % interval, ratio, p-values —
+with a plot of the differences per metric, e.g. each message-loss rate against perfect links).
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from evaluation.episodes import Episode, check_pairing, default_jobs, run_episodes, skip_reason, solver_name
@@ -46,6 +51,7 @@ from evaluation.report import (
     METRIC_DIGITS,
     METRIC_LABELS,
     PAIRED_HEADER,
+    SHARE_METRICS,
     bar_and_differences,
     cell_text,
     compare_cells,
@@ -53,10 +59,12 @@ from evaluation.report import (
     not_converged,
     paired_columns,
     read_csv,
+    reference_plot,
     sweep_plot,
+    values,
     write_csv,
 )
-from evaluation.stats import format_p
+from evaluation.stats import PairedComparison, format_p
 from taskalloc_env import TaskAllocConfig, resolve_config, resources
 from taskalloc_env.config import read_yaml, to_mapping
 from taskalloc_env.errors import ConfigError, run_cli
@@ -64,7 +72,7 @@ from taskalloc_env.errors import ConfigError, run_cli
 ROOT = Path(__file__).resolve().parent.parent   # the checkout (for the git commit of a run), if this is one
 RESULTS, DOCS = Path("results"), Path("docs") / "results.md"     # relative to where the command runs
 KEYS = {"name", "title", "source", "scenario", "overrides", "sweep", "series", "baseline", "metrics", "episodes",
-        "headline", "published", "checks", "quick"}
+        "headline", "published", "checks", "quick", "marks", "reference"}
 TESTS = ("greater", "less", "same", "ratio_above", "ratio_below")
 PACKAGES = ("taskalloc", "numpy", "scipy", "pettingzoo", "gymnasium", "matplotlib", "pyyaml", "tqdm")
 
@@ -101,6 +109,23 @@ class Point:
     overrides: Mapping[str, Any]
 
 
+@dataclasses.dataclass(frozen=True)
+class Mark:
+    """A vertical line in the sweep plots: the first point at which ``share`` of the episodes have ``metric``."""
+
+    metric: str
+    share: float
+    label: str
+
+
+@dataclasses.dataclass(frozen=True)
+class Reference:
+    """Pair every series at every point with the same series at ``point`` (same seeds), for ``metrics``."""
+
+    point: Point
+    metrics: tuple[str, ...]
+
+
 @dataclasses.dataclass
 class Experiment:
     """One experiment file, parsed and validated."""
@@ -122,6 +147,8 @@ class Experiment:
     quick_points: list[Point]
     quick_episodes: int
     raw: dict[str, Any]
+    marks: list[Mark] = dataclasses.field(default_factory=list)
+    reference: Reference | None = None
 
     def config(self, point: Point, series: Series) -> TaskAllocConfig:
         """The environment config of one cell: scenario < experiment overrides < point < series."""
@@ -216,14 +243,39 @@ def load_experiment(name_or_path: str | Path) -> Experiment:
         points=points, series=series, baseline=baseline, metrics=list(raw.get("metrics", ["score"])),
         episodes=int(raw.get("episodes", 100)), headline=_select(points, _as_list(raw.get("headline")), str(path)),
         published=str(raw.get("published", "")).strip(), checks=checks, quick_points=quick_points,
-        quick_episodes=int(quick.get("episodes", 2)), raw=raw)
+        quick_episodes=int(quick.get("episodes", 2)), raw=raw, marks=_marks(raw.get("marks"), path),
+        reference=_reference(raw.get("reference"), points, path))
     for point in points:
         for s in series:
             exp.config(point, s)
-    for metric in exp.metrics:
+    for metric in [*exp.metrics, *(exp.reference.metrics if exp.reference else ())]:
         if metric not in METRIC_LABELS:
             raise ValueError(f"{path}: unknown metric {metric!r}; known: {sorted(METRIC_LABELS)}")
     return exp
+
+
+def _marks(raw: Any, path: Any) -> list[Mark]:
+    marks = []
+    for entry in _as_list(raw):
+        if not isinstance(entry, Mapping) or set(entry) - {"metric", "share", "label"} or "metric" not in entry:
+            raise ValueError(f"{path}: a mark is {{metric, share, label}}, got {entry!r}")
+        if entry["metric"] not in SHARE_METRICS:
+            raise ValueError(f"{path}: a mark needs a yes/no metric {SHARE_METRICS}, got {entry['metric']!r}")
+        share = float(entry.get("share", 0.5))
+        if not 0.0 < share <= 1.0:
+            raise ValueError(f"{path}: a mark's share must lie in (0, 1], got {share}")
+        label = str(entry.get("label") or f"{METRIC_LABELS[entry['metric']]} on ≥ {100 * share:.0f} % of seeds")
+        marks.append(Mark(entry["metric"], share, label))
+    return marks
+
+
+def _reference(raw: Any, points: list[Point], path: Any) -> Reference | None:
+    if raw is None:
+        return None
+    if not isinstance(raw, Mapping) or set(raw) - {"point", "metrics"} or "point" not in raw:
+        raise ValueError(f"{path}: reference is {{point, metrics}}, got {raw!r}")
+    point = _select(points, [raw["point"]], f"{path} reference")[0]
+    return Reference(point, tuple(_as_list(raw.get("metrics")) or ["score"]))
 
 
 def _as_list(value: Any) -> list:
@@ -371,6 +423,64 @@ def evaluate_check(check: Check, cells: Mapping, points: Sequence[Point]) -> tup
     return "; ".join(observed), verdict
 
 
+def mark_points(exp: Experiment, cells: Mapping, points: Sequence[Point]) -> list[tuple[Mark, Point | None]]:
+    """Each mark with the first point at which its share of episodes (every series pooled) reaches the threshold."""
+    found = []
+    for mark in exp.marks:
+        hit = None
+        for p in points:
+            x = np.concatenate([values(cells[(p.label, s.label)], mark.metric) for s in exp.series
+                                if (p.label, s.label) in cells] or [np.zeros(0)])
+            x = x[np.isfinite(x)]
+            if x.size and x.mean() >= mark.share - 1e-12:
+                hit = p
+                break
+        found.append((mark, hit))
+    return found
+
+
+def marks_note(exp: Experiment, marks: Sequence[tuple[Mark, Point | None]]) -> str:
+    parts = [f"{m.label} from {exp.xlabel} = {p.label}" if p is not None else f"{m.label}: at no point"
+             for m, p in marks]
+    return "Marked in the plots (episodes of every series pooled): " + "; ".join(parts) + ".\n"
+
+
+def _against_reference(cells: Mapping, point: Point, ref: Point, series: str, metric: str) -> PairedComparison | None:
+    a, b = cells.get((point.label, series)), cells.get((ref.label, series))
+    if a is None or b is None:
+        return None
+    return compare_cells(a, b, metric)
+
+
+def reference_table(exp: Experiment, cells: Mapping, points: Sequence[Point], ref: Point, metric: str) -> str:
+    """Every series at every point against itself at ``ref``: mean ± sd, Δ with its 95 % t-interval, ratio, p (t),
+    share of seeds above and tied; ``same instances`` says whether the paired seeds drew identical problems."""
+    digits = METRIC_DIGITS.get(metric, 1)
+    body = []
+    for s in exp.series:
+        for p in points:
+            pc = _against_reference(cells, p, ref, s.label, metric)
+            if pc is None:
+                continue
+            if p == ref:
+                body.append([p.label, s.label, cell_text(cells[(p.label, s.label)], metric), "reference", "", "",
+                             "", ""])
+                continue
+            same = {r["instance"] for r in cells[(p.label, s.label)]} == {r["instance"] for r in
+                                                                         cells[(ref.label, s.label)]}
+            ci = "–" if np.isnan(pc.ci95[0]) else f"[{pc.ci95[0]:+.{digits}f}, {pc.ci95[1]:+.{digits}f}]"
+            body.append([p.label, s.label, cell_text(cells[(p.label, s.label)], metric),
+                         f"{pc.mean_diff:+.{digits}f} {ci}" + ("" if same else " †"),
+                         "–" if np.isnan(pc.ratio) else f"{pc.ratio:.3f}", format_p(pc.p_t),
+                         f"{100 * pc.better:.0f} %", f"{100 * pc.tied:.0f} %"])
+    header = [exp.xlabel or "setting", "series", METRIC_LABELS[metric], "Δ vs reference [95 % CI]", "ratio",
+              "p (t)", "above", "ties"]
+    table = markdown_table(header, body, align="ll" + "r" * (len(header) - 2))
+    if any(" †" in str(row[3]) for row in body):
+        table += "\n† the same seeds drew different instances here: paired by seed, not by instance.\n"
+    return table
+
+
 def checks_table(exp: Experiment, cells: Mapping, points: Sequence[Point]) -> str:
     body = [[c.claim, *evaluate_check(c, cells, points)] for c in exp.checks]
     return markdown_table(["published claim", "ours", "reproduced"], body, align="llc")
@@ -384,12 +494,23 @@ def write_reports(exp: Experiment, rows: Sequence[Mapping[str, Any]], target: Pa
     headline = [p for p in exp.headline if p in points]
     seeds_run = max((len(c) for c in cells.values()), default=0)
     figures = []
+    marks = mark_points(exp, cells, points)
     if len(points) > 1:
         for metric in exp.metrics:
             series = {s.label: [cells.get((p.label, s.label), []) for p in points] for s in exp.series}
             sweep_plot(target / f"{metric}.png", [p.x for p in points], series, metric, exp.xlabel,
-                       f"{exp.title}\n{METRIC_LABELS[metric]}, {seeds_run} paired seeds per point")
+                       f"{exp.title}\n{METRIC_LABELS[metric]}, {seeds_run} paired seeds per point",
+                       marks=[(p.x, f"{m.label} ({exp.xlabel} = {p.label})") for m, p in marks if p is not None])
             figures.append(f"{metric}.png")
+    ref = exp.reference if exp.reference and exp.reference.point in points and len(points) > 1 else None
+    if ref is not None:
+        for metric in ref.metrics:
+            diffs = {s.label: [_against_reference(cells, p, ref.point, s.label, metric) for p in points]
+                     for s in exp.series}
+            reference_plot(target / f"delta_{metric}.png", [p.x for p in points], diffs, metric, exp.xlabel,
+                           f"{exp.xlabel} = {ref.point.label}",
+                           f"{exp.title}\npaired against {exp.xlabel} = {ref.point.label}, {seeds_run} seeds")
+            figures.append(f"delta_{metric}.png")
     for p in headline or ([] if len(points) > 1 else points):
         name = "headline.png" if len(points) == 1 else f"headline_{_slug(p.label)}.png"
         present = {s.label: cells[(p.label, s.label)] for s in exp.series if (p.label, s.label) in cells}
@@ -400,16 +521,22 @@ def write_reports(exp: Experiment, rows: Sequence[Mapping[str, Any]], target: Pa
         else []
     sections = [f"# {exp.title}\n", f"Source: {exp.source}. {seeds_run} paired seeds per cell.\n"]
     for metric in exp.metrics:
-        sections.append(f"## {METRIC_LABELS[metric]} (mean ± sd)\n\n" + metric_table(exp, cells, points, metric))
+        sections.append(f"## {METRIC_LABELS[metric]} ({_how(metric)})\n\n" + metric_table(exp, cells, points, metric))
     if exp.baseline:
         sections.append(f"## Paired against {exp.baseline} (score)\n\n" + paired_table(exp, cells, points))
+    if ref is not None:
+        for metric in ref.metrics:
+            sections.append(f"## Paired against {exp.xlabel} = {ref.point.label} ({METRIC_LABELS[metric]}, same "
+                            "series, same seeds)\n\n" + reference_table(exp, cells, points, ref.point, metric))
+    if marks:
+        sections.append(marks_note(exp, marks))
     if exp.checks:
         sections.append("## Published claims\n\n" + checks_table(exp, cells, points))
     sections.append(_convergence_note(rows, skipped))
     sections.append("\n".join(f"![{f}]({f})" for f in figures) + "\n")
     (target / "table.md").write_text("\n".join(sections))
     if docs is not None:
-        block = _docs_block(exp, cells, points, headline, figures, target, docs, rows, skipped)
+        block = _docs_block(exp, cells, points, headline, figures, target, docs, rows, skipped, marks, ref)
         update_docs(docs, exp.name, exp.title, block)
 
 
@@ -424,7 +551,8 @@ def _convergence_note(rows: Sequence[Mapping[str, Any]], skipped: Sequence[str])
 
 def _docs_block(exp: Experiment, cells: Mapping, points: Sequence[Point], headline: Sequence[Point],
                 figures: Sequence[str], target: Path, docs: Path, rows: Sequence[Mapping[str, Any]],
-                skipped: Sequence[str]) -> str:
+                skipped: Sequence[str], marks: Sequence[tuple[Mark, Point | None]] = (),
+                ref: Reference | None = None) -> str:
     seeds_run = max((len(c) for c in cells.values()), default=0)
     rel = Path(_relpath(target, docs.parent))
     setting = ", ".join(f"{k} = {_label(v)}" for k, v in exp.overrides.items())
@@ -435,15 +563,27 @@ def _docs_block(exp: Experiment, cells: Mapping, points: Sequence[Point], headli
     if exp.published:
         parts.append(f"**Published:** {exp.published}\n")
     for metric in exp.metrics:
-        parts.append(f"**Ours, {METRIC_LABELS[metric]}** (mean ± sd):\n\n" + metric_table(exp, cells, points, metric))
+        parts.append(f"**Ours, {METRIC_LABELS[metric]}** ({_how(metric)}):\n\n"
+                     + metric_table(exp, cells, points, metric))
     if exp.baseline and headline:
         parts.append(f"**Ours, paired against {exp.baseline}** at the headline setting:\n\n"
                      + paired_table(exp, cells, headline))
+    if ref is not None:
+        for metric in ref.metrics:
+            parts.append(f"**Ours, paired against {exp.xlabel} = {ref.point.label}** ({METRIC_LABELS[metric]}; each "
+                         "series against itself on the same seeds):\n\n"
+                         + reference_table(exp, cells, points, ref.point, metric))
+    if marks:
+        parts.append(marks_note(exp, marks))
     if exp.checks:
         parts.append("**Published claims on our data:**\n\n" + checks_table(exp, cells, points))
     parts.append(_convergence_note(rows, skipped))
     parts.append(" ".join(f"![{exp.name} {f}]({rel}/{f})" for f in figures) + "\n")
     return "\n".join(parts)
+
+
+def _how(metric: str) -> str:
+    return "share of episodes" if metric in SHARE_METRICS else "mean ± sd"
 
 
 def _relpath(path: Path, start: Path) -> str:

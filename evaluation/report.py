@@ -28,20 +28,36 @@ METRIC_LABELS = {
     "comm_steps_to_agreement": "comm steps / agent to agreement", "invalid_actions": "invalid actions",
     "messages_lost": "messages lost", "messages_delayed": "messages delayed",
     "data_received_per_agent": "data items received / agent", "data_sent_per_agent": "data items sent / agent",
-    "data_per_assignment": "data items / assignment", "conflicting_bids_per_agent": "conflicting bids / agent",
+    "data_per_assignment": "data items / assignment made",
+    "data_per_agent_per_assignment": "data items / agent / assignment (Σ L_j)",
+    "conflicting_bids_per_agent": "conflicting bids / agent",
     "dropped_agents": "failed agents", "connected": "connected network", "fully_connected": "fully connected",
+    "converged": "converged",
 }
 METRIC_DIGITS = {"score": 0, "valid_tasks": 1, "conflicts": 1, "rounds": 1, "messages": 0, "comm_steps": 1,
                  "informative_messages": 0, "data_items": 0, "bids": 0, "quits": 1, "rounds_to_agreement": 1,
                  "comm_steps_to_agreement": 1, "invalid_actions": 1, "messages_lost": 0, "messages_delayed": 0,
                  "data_received_per_agent": 0, "data_sent_per_agent": 0, "data_per_assignment": 0,
-                 "conflicting_bids_per_agent": 2, "dropped_agents": 2, "connected": 2, "fully_connected": 2}
+                 "data_per_agent_per_assignment": 2,
+                 "conflicting_bids_per_agent": 2, "dropped_agents": 2, "connected": 2, "fully_connected": 2,
+                 "converged": 2}
+# yes/no figures: a cell shows the share of its episodes (``62 %``), a plot the share with its 95 % interval
+SHARE_METRICS = ("connected", "fully_connected", "converged")
 
 
 def values(rows: Iterable[Mapping[str, Any]], metric: str) -> np.ndarray:
-    """The metric of ``rows`` in seed order; missing values (None, '') become nan."""
+    """The metric of ``rows`` in seed order; missing values (None, '') become nan, yes/no ones 1 and 0 (a CSV
+    holds them as ``True``/``False``)."""
     ordered = sorted(rows, key=lambda r: int(r["seed"]))
-    return np.array([np.nan if r.get(metric) in (None, "") else float(r[metric]) for r in ordered])
+    return np.array([_number(r.get(metric)) for r in ordered])
+
+
+def _number(value: Any) -> float:
+    if value in (None, ""):
+        return np.nan
+    if isinstance(value, str) and value in ("True", "False", "true", "false"):
+        return float(value in ("True", "true"))
+    return float(value)
 
 
 def seeds(rows: Iterable[Mapping[str, Any]]) -> list[int]:
@@ -57,7 +73,10 @@ def cell_text(rows: Sequence[Mapping[str, Any]], metric: str) -> str:
     """``mean ± sd`` of a cell, with ``(k nc)`` when k of its episodes did not converge; ``–`` if no values."""
     x = values(rows, metric)
     x = x[~np.isnan(x)]
-    text = format_mean_sd(x, METRIC_DIGITS.get(metric, 1)) if x.size else "–"
+    if metric in SHARE_METRICS:
+        text = f"{100 * x.mean():.0f} %" if x.size else "–"
+    else:
+        text = format_mean_sd(x, METRIC_DIGITS.get(metric, 1)) if x.size else "–"
     bad = not_converged(rows)
     return f"{text} ({bad} nc)" if bad else text
 
@@ -161,16 +180,21 @@ def _half_ci(x: np.ndarray) -> float:
 
 
 def sweep_plot(path: Path, xs: Sequence[Any], series: Mapping[str, Sequence[Sequence[Mapping[str, Any]]]],
-               metric: str, xlabel: str, title: str = "") -> None:
-    """Mean ± sd of ``metric`` against the sweep value, one line per series (categorical x if not numeric)."""
+               metric: str, xlabel: str, title: str = "", marks: Sequence[tuple[Any, str]] = ()) -> None:
+    """Mean ± sd of ``metric`` against the sweep value, one line per series (categorical x if not numeric); a share
+    (``SHARE_METRICS``) with its 95 % interval instead. ``marks``: (x, label) pairs drawn as vertical lines."""
     numeric = all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in xs)
     pos = np.asarray(xs, dtype=float) if numeric else np.arange(len(xs), dtype=float)
     fig, ax = plt.subplots(figsize=(8.0, 4.2))
     width = 0.8 / max(1, len(series))
+    share = metric in SHARE_METRICS
     for k, (label, cells) in enumerate(series.items()):
         stats_ = [values(c, metric) for c in cells]
         mean = np.array([np.nanmean(s) if np.isfinite(s).any() else np.nan for s in stats_])
-        sd = np.array([np.nanstd(s, ddof=1) if np.isfinite(s).sum() > 1 else 0.0 for s in stats_])
+        if share:
+            sd = np.array([_half_ci(s[np.isfinite(s)]) for s in stats_])
+        else:
+            sd = np.array([np.nanstd(s, ddof=1) if np.isfinite(s).sum() > 1 else 0.0 for s in stats_])
         if np.isnan(mean).all():
             continue
         if numeric:     # small offsets keep the error bars of overlapping series apart
@@ -179,10 +203,45 @@ def sweep_plot(path: Path, xs: Sequence[Any], series: Mapping[str, Sequence[Sequ
             ax.errorbar(pos + shift, mean, yerr=sd, marker="o", ms=3, capsize=2, lw=1.2, label=label)
         else:
             ax.bar(pos + (k - (len(series) - 1) / 2) * width, mean, width, yerr=sd, capsize=2, label=label)
+    for n, (x, text) in enumerate(marks):
+        where = float(x) if numeric else float(list(xs).index(x))
+        ax.axvline(where, color=("tab:red", "tab:purple", "tab:brown", "tab:grey")[n % 4], ls="--", lw=1.0,
+                   label=text)
     if not numeric:
         ax.set_xticks(pos, [str(x) for x in xs], rotation=20, ha="right")
     ax.set_xlabel(xlabel)
-    ax.set_ylabel(f"{METRIC_LABELS.get(metric, metric)} (mean ± sd)")
+    ax.set_ylabel(f"{METRIC_LABELS.get(metric, metric)} ({'share, 95 % CI' if share else 'mean ± sd'})")
+    ax.set_title(textwrap.fill(title, 70), fontsize=9)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def reference_plot(path: Path, xs: Sequence[Any], diffs: Mapping[str, Sequence[PairedComparison | None]],
+                   metric: str, xlabel: str, reference: str, title: str = "") -> None:
+    """Paired differences against the reference point (same series, same seeds): mean Δ with its 95 % t-interval,
+    one line per series (categorical x if not numeric)."""
+    numeric = all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in xs)
+    pos = np.asarray(xs, dtype=float) if numeric else np.arange(len(xs), dtype=float)
+    step = np.min(np.diff(pos)) if len(pos) > 1 else 1.0
+    fig, ax = plt.subplots(figsize=(8.0, 4.2))
+    ax.axhline(0, color="grey", lw=0.8)
+    for k, (label, comparisons) in enumerate(diffs.items()):
+        mean = np.array([np.nan if c is None else c.mean_diff for c in comparisons])
+        low = np.array([np.nan if c is None else c.mean_diff - c.ci95[0] for c in comparisons])
+        high = np.array([np.nan if c is None else c.ci95[1] - c.mean_diff for c in comparisons])
+        if np.isnan(mean).all():
+            continue
+        shift = (k - (len(diffs) - 1) / 2) * 0.04 * step
+        ax.errorbar(pos + shift, mean, yerr=np.nan_to_num(np.vstack([low, high])), marker="o", ms=3, capsize=3,
+                    lw=1.2, label=label)
+    if not numeric:
+        ax.set_xticks(pos, [str(x) for x in xs], rotation=20, ha="right")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(f"Δ {METRIC_LABELS.get(metric, metric)} vs {reference} (mean, 95 % CI)")
     ax.set_title(textwrap.fill(title, 70), fontsize=9)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     ax.grid(alpha=0.3)

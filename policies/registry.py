@@ -1,4 +1,10 @@
-"""Policies by name, as the command line and the experiment configs write them."""
+"""Policies by name, as the command line and the experiment configs write them.
+
+A name may carry parameters after a colon: ``cbga+tq:delta=3`` is CBGA with task quitting at the threshold δ = 3
+(``quit_threshold``; its ``env_overrides`` then hold ``delta=3``), so an experiment can run one series per δ
+(thesis Fig 5.10) without a policy object in the YAML. Parameters are ``key=integer`` pairs separated by commas;
+``delta`` is the only one, for the policies that quit (``cbga+tq``, ``cbgabi``).
+"""
 
 from __future__ import annotations
 
@@ -16,16 +22,42 @@ FACTORIES: dict[str, Callable[..., Policy]] = {
     "cbga+tb": lambda **kw: CBGAPolicy(team_bidding=True, **kw),
     "cbgabi": lambda **kw: CBGAPolicy(team_bidding=True, task_quitting=True, **kw),
 }
-POLICY_NAMES = (*FACTORIES, "learned:<checkpoint>")
+# name parameters: policy name -> {parameter in the name: keyword of its factory}
+PARAMETERS: dict[str, dict[str, str]] = {"cbga+tq": {"delta": "quit_threshold"},
+                                         "cbgabi": {"delta": "quit_threshold"}}
+POLICY_NAMES = (*FACTORIES, "cbga+tq:delta=<δ>", "cbgabi:delta=<δ>", "learned:<checkpoint>")
+
+
+def parse_name(name: str) -> tuple[str, dict[str, int]]:
+    """``cbga+tq:delta=3`` → (``cbga+tq``, {``quit_threshold``: 3}); a name without parameters → (name, {})."""
+    key, _, params = name.lower().partition(":")
+    if not params:
+        return key, {}
+    allowed = PARAMETERS.get(key, {})
+    if not allowed:
+        raise ValueError(f"policy {key!r} takes no parameters (got {name!r}); parameters: "
+                         + ", ".join(f"{k}:{'|'.join(v)}" for k, v in PARAMETERS.items()))
+    kwargs: dict[str, int] = {}
+    for item in params.split(","):
+        field, eq, value = item.partition("=")
+        field = field.strip()
+        if not eq or field not in allowed:
+            raise ValueError(f"policy {name!r}: {item!r} is not one of {sorted(allowed)} written as key=value")
+        try:
+            kwargs[allowed[field]] = int(value)
+        except ValueError:
+            raise ValueError(f"policy {name!r}: {field} must be an integer, got {value!r}") from None
+    return key, kwargs
 
 
 def make_policy(name: str, **kwargs) -> Policy:
-    """``random``, ``pass``, ``cbba``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi`` or ``learned:<checkpoint>``."""
-    key = name.lower()
-    if key.startswith("learned:"):
+    """``random``, ``pass``, ``cbba``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi`` (``cbga+tq:delta=3``,
+    ``cbgabi:delta=3``: with the quit threshold δ) or ``learned:<checkpoint>``."""
+    if name.lower().startswith("learned:"):
         from policies.learned import LearnedPolicy
 
         return LearnedPolicy.load(name.split(":", 1)[1], **kwargs)
+    key, params = parse_name(name)
     if key not in FACTORIES:
         raise ValueError(f"unknown policy {name!r}; known: {', '.join(POLICY_NAMES)}")
-    return FACTORIES[key](**kwargs)
+    return FACTORIES[key](**params, **kwargs)
