@@ -16,11 +16,14 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 
+from taskalloc_env import kernels
 from taskalloc_env.cbba_table import NONE, outbids
 from taskalloc_env.groups import Equipment, admit
+from taskalloc_env.kernels.bids import PREREQ_MODES, bid_rows
 from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.scenario import Scenario
 
@@ -153,3 +156,35 @@ def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment
     return BidView(gain=gain, bid=bid, slot=slot, outbid=outbid, eligible=eligible, equipment_match=equipment_match,
                    prereqs_met=prereqs_met, members=counts, group_total=group_total, lowest_bid=lowest_bid,
                    displaced=displaced, displaced_bid=displaced_bid, in_bundle=in_bundle)
+
+
+ROW_FIELDS = ("bid", "outbid", "eligible", "prereqs_met", "members", "group_total", "lowest_bid", "displaced",
+              "displaced_bid", "in_bundle")
+
+
+def refresh_rows(previous: BidView | None, rows: Sequence[int], knowledge: LocalKnowledge, scenario: Scenario,
+                 equipment: Equipment, equipment_match: np.ndarray, gain: np.ndarray, slot: np.ndarray, *,
+                 prereq_mode: str, require_known_capacity: bool, max_bundle: int, fillable: np.ndarray,
+                 bid_warping: bool = False, outbid_ties: str = "strict") -> BidView:
+    """``bid_view`` with only ``rows`` recomputed from ``previous`` (all rows without one): compiled
+    (``kernels.bids.bid_rows``) when numba is there, else ``bid_view`` in full. ``previous`` is left unchanged."""
+    if not kernels.COMPILED:
+        return bid_view(knowledge, scenario, equipment, equipment_match, gain, slot, prereq_mode=prereq_mode,
+                        require_known_capacity=require_known_capacity, max_bundle=max_bundle, fillable=fillable,
+                        bid_warping=bid_warping, outbid_ties=outbid_ties)
+    n, m = gain.shape
+    if previous is None:
+        rows = range(n)
+        arrays = {name: np.zeros((n, m), dtype=np.int64 if name in ("members", "displaced") else
+                                 bool if name in ("outbid", "eligible", "prereqs_met", "in_bundle") else float)
+                  for name in ROW_FIELDS}
+    else:
+        arrays = {name: getattr(previous, name).copy() for name in ROW_FIELDS}
+    capacity = (known_capacity(knowledge, scenario, equipment, equipment_match) if require_known_capacity
+                else np.ones((n, m), dtype=bool))
+    bid_rows(np.asarray(rows, dtype=np.int64), knowledge.bids, knowledge.winner, knowledge.single, gain,
+             knowledge.quit_blocked, np.array([len(b) for b in knowledge.bundles], dtype=np.int64), equipment_match,
+             fillable, capacity, scenario.task_agents.astype(np.int64), equipment.restricted, equipment.required,
+             equipment.agent, scenario.task_prereqs, PREREQ_MODES[prereq_mode], int(max_bundle), bid_warping,
+             outbid_ties == "strict", *arrays.values())
+    return BidView(gain=gain, slot=slot, equipment_match=equipment_match, **arrays)

@@ -22,7 +22,7 @@ import os
 import numpy as np
 
 from taskalloc_env.allocation import Allocation, Counters
-from taskalloc_env.bidding import BidView, bid_view
+from taskalloc_env.bidding import BidView, refresh_rows
 from taskalloc_env.cbba_table import NONE
 from taskalloc_env.config import TaskAllocConfig, round_bound
 from taskalloc_env.consensus import Snapshot, Traffic, exchange, snapshot
@@ -112,6 +112,7 @@ class Protocol:
         self._slot = np.full((s.n_agents, s.n_tasks), -1, dtype=np.int64)
         self._dirty = set(range(s.n_agents))
         self._view: BidView | None = None
+        self._stale_rows: set[int] = set()
         self._quits: np.ndarray | None = None
         self._score: TeamScore | None = None
         self._last_bids = self.knowledge.bids.copy()
@@ -119,9 +120,14 @@ class Protocol:
 
     # -- cached derived state ------------------------------------------------------------------------------------
     def _touch(self, agent: int | None = None) -> None:
+        """Agent ``agent``'s tables changed (only its path and its row of the view need recomputing), or, without
+        an agent, anyone's may have (the whole view)."""
         if agent is not None:
             self._dirty.add(agent)
-        self._view = None
+            self._stale_rows.add(agent)
+        else:
+            self._view = None
+            self._stale_rows.clear()
         self._quits = None
         self._score = None
 
@@ -148,13 +154,15 @@ class Protocol:
 
     def view(self) -> BidView:
         """The bidding situation of every agent (cached until the next change)."""
-        if self._view is None:
+        if self._view is None or self._stale_rows:
             self._refresh_paths()
-            self._view = bid_view(self.knowledge, self.scenario, self.equipment, self.equipment_match,
-                                  self._gain.copy(), self._slot.copy(), prereq_mode=self.cfg.prereq_mode,
-                                  require_known_capacity=self.cfg.require_known_capacity,
-                                  max_bundle=self.max_bundle, fillable=self.fillable,
-                                  bid_warping=self.cfg.bid_warping, outbid_ties=self.cfg.outbid_ties)
+            self._view = refresh_rows(self._view, sorted(self._stale_rows), self.knowledge, self.scenario,
+                                      self.equipment, self.equipment_match, self._gain.copy(), self._slot.copy(),
+                                      prereq_mode=self.cfg.prereq_mode,
+                                      require_known_capacity=self.cfg.require_known_capacity,
+                                      max_bundle=self.max_bundle, fillable=self.fillable,
+                                      bid_warping=self.cfg.bid_warping, outbid_ties=self.cfg.outbid_ties)
+            self._stale_rows.clear()
         return self._view
 
     def score(self) -> TeamScore:

@@ -8,12 +8,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from taskalloc_env import kernels
+from taskalloc_env.bidding import bid_view, refresh_rows
 from taskalloc_env.config import PrerequisiteChains, TaskAllocConfig
 from taskalloc_env.consensus import Snapshot, exchange, exchange_reference
 from taskalloc_env.groups import Equipment
 from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.network import Deliveries
-from taskalloc_env.scenario import generate
+from taskalloc_env.scenario import Agent, Scenario, Task, generate
 from taskalloc_env.scoring import ScoringModel
 
 pytestmark = pytest.mark.skipif(not kernels.COMPILED, reason="numba is not installed")
@@ -115,3 +116,67 @@ def test_compiled_plan_equals_the_reference(case):
     np.testing.assert_allclose(got.gain, want.gain, rtol=1e-12, atol=1e-12)
     ties = np.isclose(got.gain, want.gain, rtol=1e-12) & (got.slot != want.slot)
     np.testing.assert_array_equal(got.slot[~ties], want.slot[~ties])
+
+
+@st.composite
+def views(draw):
+    """A scenario with single- and multi-agent tasks (equipment, prerequisites), random tables in every agent's
+    row (ties frequent), gains, quit blocks and bundles, and the view options."""
+    n, m = draw(st.integers(2, 6)), draw(st.integers(1, 7))
+    typed = draw(st.booleans())
+    types = [draw(st.sampled_from("AB")) for _ in range(n)] if typed else [None] * n
+    agents = [Agent((float(k), 0.0, 0.0), 1.0, () if t is None else (t,)) for k, t in enumerate(types)]
+    tasks = []
+    for j in range(m):
+        need = draw(st.integers(1, 3))
+        equipment = tuple(draw(st.sampled_from("AB")) for _ in range(need)) if typed and draw(st.booleans()) else ()
+        prereqs = tuple(p for p in range(j) if draw(st.integers(0, 4)) == 0)
+        tasks.append(Task((1.0, 1.0, 0.0), 100.0, 0.0, 50.0, 1.0, agents=need, equipment=equipment,
+                          prerequisites=prereqs))
+    scenario = Scenario.from_entities(agents, tasks, equipment_names=("A", "B") if typed else ())
+    kn = LocalKnowledge.empty(n, m, scenario.task_agents == 1, know_everyone=draw(st.booleans()))
+    values = st.sampled_from([0.0, 0.0, 10.0, 20.0, 20.0, 35.0])
+    for i in range(n):
+        for j in range(m):
+            holders = [k for k in range(n) if draw(values) > 0][: scenario.task_agents[j]]
+            for k in holders:
+                kn.set_bid(i, k, j, draw(values) or 5.0)
+        kn.bundles[i] = [int(j) for j in np.flatnonzero(kn.bids[i, i] > 0)]
+        kn.known[i] = [draw(st.booleans()) for _ in range(n)]
+        kn.known[i, i] = True
+    kn.quit_blocked[:] = np.array([[draw(st.integers(0, 4)) == 0 for _ in range(m)] for _ in range(n)])
+    gain = np.array([[draw(st.sampled_from([0.0, 5.0, 20.0, 35.0])) for _ in range(m)] for _ in range(n)])
+    options = dict(prereq_mode=draw(st.sampled_from(["all_have_bid", "all_complete", "any_has_bid"])),
+                   require_known_capacity=draw(st.booleans()), max_bundle=draw(st.integers(1, m + 1)),
+                   fillable=np.array([draw(st.integers(0, 5)) > 0 for _ in range(m)]),
+                   bid_warping=draw(st.booleans()), outbid_ties=draw(st.sampled_from(["strict", "higher_id"])))
+    return scenario, kn, gain, options, draw(st.integers(0, n - 1))
+
+
+@pytest.mark.filterwarnings("ignore:tasks .* are identical")
+@settings(max_examples=400, deadline=None)
+@given(views())
+def test_compiled_view_rows_equal_the_reference(case):
+    """All rows from scratch, and one row refreshed after only that row's table changed, equal ``bid_view``."""
+    scenario, kn, gain, options, row = case
+    equipment = Equipment(scenario.agent_equipment, scenario.task_equipment)
+    slot = np.zeros(gain.shape, dtype=np.int64)
+    args = (scenario, equipment, scenario.eligible(), gain, slot)
+
+    def same(got, want):
+        for name in ("bid", "outbid", "eligible", "prereqs_met", "members", "group_total", "lowest_bid", "displaced",
+                     "displaced_bid", "in_bundle", "can_bid"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+
+    first = refresh_rows(None, [], kn, *args, **options)
+    same(first, bid_view(kn, *args, **options))
+    if kn.bids[row, row, 0] > 0:                                                # only this row changes
+        kn.set_bid(row, row, 0, 0.0)
+    else:                                       # row joins task 0, displacing its lowest member if the group is full
+        members = np.flatnonzero(kn.bids[row, :, 0] > 0)
+        if len(members) >= scenario.task_agents[0]:
+            kn.set_bid(row, int(members[np.argmin(kn.bids[row, members, 0])]), 0, 0.0)
+        kn.set_bid(row, row, 0, 25.0)
+    kn.bundles[row] = [int(j) for j in np.flatnonzero(kn.bids[row, row] > 0)]
+    kn.quit_blocked[row] = ~kn.quit_blocked[row]
+    same(refresh_rows(first, [row], kn, *args, **options), bid_view(kn, *args, **options))

@@ -1,0 +1,111 @@
+"""The bid view of chosen agents, compiled; ``bidding.bid_view`` (numpy, all agents at once) is the reference.
+
+``bid_rows`` recomputes rows of the ``BidView`` arrays: the warped bid, the outbid test of Alg 5 l. 8–20 with the
+group rules of ``groups`` (room, the displaced (bid, id)-lowest replaceable member), the prerequisite filter of
+``prereq_mode`` and the eligibility filters, reading only each agent's own table. A bid changes only the bidder's
+row, so between rounds the protocol refreshes only those rows. Comparisons, a running minimum and a sum over
+the members in agent order (the order numpy sums the reference's columns in): results are bit-identical to the
+reference (``tests/test_kernels.py``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from taskalloc_env.kernels import jit
+from taskalloc_env.kernels.merge import NONE, _outbids, _replaceable, _slot_open
+
+ALL_HAVE_BID, ALL_COMPLETE, ANY_HAS_BID = 0, 1, 2
+PREREQ_MODES = {"all_have_bid": ALL_HAVE_BID, "all_complete": ALL_COMPLETE, "any_has_bid": ANY_HAS_BID}
+
+
+@jit
+def _covers(column: np.ndarray, required: np.ndarray, agent_eq: np.ndarray) -> bool:
+    """``Equipment.covers`` for one column: the members' items include te_j as a multiset, (3.5)."""
+    for e in range(required.size):
+        have = 0
+        for k in range(column.size):
+            if column[k] > 0 and agent_eq[k, e]:
+                have += 1
+        if have < required[e]:
+            return False
+    return True
+
+
+@jit
+def bid_rows(rows: np.ndarray, bids: np.ndarray, winner: np.ndarray, single: np.ndarray, gain: np.ndarray,
+             quit_blocked: np.ndarray, bundle_sizes: np.ndarray, equipment_match: np.ndarray, fillable: np.ndarray,
+             capacity: np.ndarray, need: np.ndarray, restricted: np.ndarray, required: np.ndarray,
+             agent_eq: np.ndarray, prereqs: np.ndarray, prereq_mode: int, max_bundle: int, warping: bool,
+             strict: bool, bid: np.ndarray, outbid: np.ndarray, eligible: np.ndarray, prereqs_met: np.ndarray,
+             members: np.ndarray, group_total: np.ndarray, lowest_bid: np.ndarray, displaced: np.ndarray,
+             displaced_bid: np.ndarray, in_bundle: np.ndarray) -> None:
+    """Fill rows ``rows`` of the (N, M) view arrays in place (see ``bidding.BidView`` for their meaning)."""
+    n, _, m = bids.shape
+    any_prereqs = prereqs.any()
+    for i in rows:
+        lowest_own = np.inf
+        for j in range(m):
+            in_bundle[i, j] = bids[i, i, j] > 0
+            if in_bundle[i, j] and bids[i, i, j] < lowest_own:
+                lowest_own = bids[i, i, j]
+        for j in range(m):
+            b = min(gain[i, j], lowest_own) if warping else gain[i, j]
+            bid[i, j] = b
+            if single[j]:
+                w = winner[i, j]
+                held = 0.0 if w == NONE else bids[i, w, j]
+                members[i, j] = 0 if w == NONE else 1
+                group_total[i, j] = held
+                lowest_bid[i, j] = held
+                better = b > held if strict else _outbids(b, i, held, w)
+                outbid[i, j] = w == NONE or better
+                displaced[i, j] = w
+                displaced_bid[i, j] = held
+                continue
+            column = bids[i, :, j]
+            count = 0
+            total = 0.0
+            lowest = np.inf
+            victim = -1
+            for k in range(n):
+                if column[k] > 0:
+                    count += 1
+                    total += column[k]
+                    lowest = min(lowest, column[k])
+                    if (not restricted[j] or _replaceable(k, i, required[j], agent_eq)) \
+                            and (victim < 0 or column[k] < column[victim]):
+                        victim = k
+            members[i, j] = count
+            group_total[i, j] = total
+            lowest_bid[i, j] = lowest if count > 0 else 0.0
+            room = count < need[j] and (not restricted[j] or _slot_open(column, i, required[j], agent_eq))
+            beats = False
+            if not room and victim >= 0:
+                beats = b > column[victim] if strict else _outbids(b, i, column[victim], victim)
+            outbid[i, j] = room or beats
+            displaced[i, j] = victim if beats else NONE
+            displaced_bid[i, j] = column[victim] if beats else 0.0
+        for j in range(m):                                   # prerequisites ((3.6), article eq. (5))
+            met = True
+            if any_prereqs:
+                if prereq_mode == ANY_HAS_BID:
+                    has, some = False, False
+                    for p in range(m):
+                        if prereqs[j, p]:
+                            has = True
+                            some = some or members[i, p] > 0
+                    met = some or not has
+                else:
+                    for p in range(m):
+                        if prereqs[j, p]:
+                            if prereq_mode == ALL_HAVE_BID:
+                                done = members[i, p] > 0
+                            else:
+                                done = members[i, p] == need[p] and _covers(bids[i, :, p], required[p], agent_eq)
+                            if not done:
+                                met = False
+                                break
+            prereqs_met[i, j] = met
+            eligible[i, j] = (equipment_match[i, j] and met and not in_bundle[i, j] and fillable[j]
+                              and capacity[i, j] and not quit_blocked[i, j] and bundle_sizes[i] < max_bundle)
