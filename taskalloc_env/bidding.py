@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 
 import numpy as np
@@ -46,7 +47,7 @@ class BidView:
     displaced_bid: np.ndarray   # that member's bid (0 if none)
     in_bundle: np.ndarray
 
-    @property
+    @functools.cached_property
     def can_bid(self) -> np.ndarray:
         """Valid bids: eligible, outbidding, with a positive marginal gain."""
         return self.eligible & self.outbid & (self.gain > 0)

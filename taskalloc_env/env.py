@@ -297,7 +297,7 @@ class TaskAllocEnv(ParallelEnv):
 
     # -- outputs ---------------------------------------------------------------------------------------------------
     def _observations(self) -> dict[str, dict[str, np.ndarray]]:
-        obs = self._builder.build(self.protocol, self._passed).astype(self.dtype)
+        obs = self._builder.build(self.protocol, self._passed, self.dtype)
         self._masks = self._builder.action_masks(self.protocol, self._passed)
         return {a: {"observation": obs[self.agent_index[a]], "action_mask": self._masks[self.agent_index[a]].copy()}
                 for a in self.agents}

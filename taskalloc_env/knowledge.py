@@ -54,8 +54,7 @@ class LocalKnowledge:
     # -- views -------------------------------------------------------------------------------------------------
     def own_bids(self) -> np.ndarray:
         """(N, M) X_i[i][j]: each agent's own bids."""
-        n = self.bids.shape[0]
-        return self.bids[np.arange(n), np.arange(n), :]
+        return np.diagonal(self.bids, axis1=0, axis2=1).T.copy()
 
     def winning_bid(self) -> np.ndarray:
         """(N, M) the bid of the cached winner of each single-agent task (0 for none)."""

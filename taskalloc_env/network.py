@@ -56,10 +56,14 @@ class CommGraph:
         self.adjacency = adjacency
         self.adjacency.setflags(write=False)
         self.degree = adjacency.sum(axis=1)
+        if comm_range is None and alive is None:        # everyone hears everyone: one hop, one component
+            self.hops = np.ones((n, n)) - np.eye(n)
+            self.diameter = 1 if n > 1 else 0
+            self.component = np.zeros(n, dtype=np.int64)
+            return
         graph = csr_array(adjacency)
         # breadth-first search from every agent: O(N · links), not the O(N³) of boolean matrix powers
-        self.hops = np.ones((n, n)) - np.eye(n) if comm_range is None and alive is None else \
-            shortest_path(graph, method="D", unweighted=True, directed=False)
+        self.hops = shortest_path(graph, method="D", unweighted=True, directed=False)
         finite = self.hops[np.isfinite(self.hops)]
         self.diameter = int(finite.max()) if finite.size else 0
         labels = connected_components(graph, directed=False)[1]

@@ -140,14 +140,21 @@ class ObservationBuilder:
         self.layout = ObservationLayout(s.n_tasks, len(s.equipment_names), names)
         self.low, self.high = self.layout.bounds(max_agents_per_task, max_rounds, s.n_agents)
         self.scales = Scales.of(s)
-        self._static = self._static_task_features(protocol)
+        self._buffer = self._static_features(protocol)
+        self._columns = {name: c for c, name in enumerate(self.layout.task_names)}
+        self._tasks = self._buffer[:, self.layout.own_size:].reshape(s.n_agents, s.n_tasks, self.layout.task_size)
 
     def space(self, dtype: np.dtype) -> spaces.Box:
         return spaces.Box(self.low.astype(dtype), self.high.astype(dtype), dtype=dtype)
 
-    def _static_task_features(self, protocol: Protocol) -> np.ndarray:
+    def _static_features(self, protocol: Protocol) -> np.ndarray:
+        """(N, D) observations with the columns that never change filled in (the rest is written by ``build``)."""
         s = protocol.scenario
-        f = np.zeros((s.n_agents, s.n_tasks, self.layout.task_size))
+        obs = np.zeros((s.n_agents, self.layout.size))
+        obs[:, :3] = s.agent_pos / self.scales.arena
+        obs[:, 3] = s.agent_speed / self.scales.max_speed
+        obs[:, len(OWN_FEATURES):self.layout.own_size] = s.agent_equipment
+        f = obs[:, self.layout.own_size:].reshape(s.n_agents, s.n_tasks, self.layout.task_size)
         col = self.layout.task_column
         f[:, :, col("required_agents")] = s.task_agents[None, :] / s.n_agents
         f[:, :, col("window_start")], f[:, :, col("window_end")] = self.scales.window(s)
@@ -155,16 +162,16 @@ class ObservationBuilder:
         f[:, :, col("dx")], f[:, :, col("dy")], f[:, :, col("dz")] = rel[..., 0], rel[..., 1], rel[..., 2]
         f[:, :, col("distance")] = protocol.model.dist_agent_task / self.scales.diagonal
         f[:, :, col("equipment_match")] = protocol.equipment_match
-        return f
+        return obs
 
-    def build(self, protocol: Protocol, passed: np.ndarray) -> np.ndarray:
-        """(N, D) observations; row i uses only agent i's table, path and flags."""
+    def build(self, protocol: Protocol, passed: np.ndarray, dtype: np.dtype | type = np.float64) -> np.ndarray:
+        """(N, D) observations in ``dtype`` (a new array); row i uses only agent i's table, path and flags."""
         s = protocol.scenario
         kn = protocol.knowledge
         view = protocol.view()
         unit = self.scales.reward_unit
-        col = self.layout.task_column
-        f = self._static.copy()
+        col = self._columns.__getitem__
+        f = self._tasks
         f[:, :, col("gain")] = view.gain / unit
         f[:, :, col("can_bid")] = view.can_bid
         f[:, :, col("outbid")] = view.outbid
@@ -184,14 +191,11 @@ class ObservationBuilder:
             np.fill_diagonal(silence, 0.0)
             members = kn.bids > 0                                                               # (N, N, M)
             f[:, :, col("member_silence")] = np.minimum(np.where(members, silence[:, :, None], 0.0).max(axis=1), 1.0)
-        own = np.zeros((s.n_agents, self.layout.own_size))
-        own[:, :3] = s.agent_pos / self.scales.arena
-        own[:, 3] = s.agent_speed / self.scales.max_speed
+        own = self._buffer
         own[:, 4] = [len(b) / s.n_tasks for b in kn.bundles]
         own[:, 5] = min(protocol.round / protocol.max_rounds, 1.0)
         own[:, 6] = passed
-        own[:, len(OWN_FEATURES):] = s.agent_equipment
-        return np.concatenate([own, f.reshape(s.n_agents, -1)], axis=1)
+        return self._buffer.astype(dtype)
 
     def action_masks(self, protocol: Protocol, passed: np.ndarray) -> np.ndarray:
         """(N, 1 + 2M) int8: pass always, valid bids, allowed quits; a passed agent may only pass (sync rounds)."""

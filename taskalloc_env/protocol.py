@@ -114,6 +114,8 @@ class Protocol:
         self._view: BidView | None = None
         self._stale_rows: set[int] = set()
         self._quits: np.ndarray | None = None
+        self._no_quits = np.zeros((s.n_agents, s.n_tasks), dtype=bool)
+        self._no_quits.setflags(write=False)
         self._score: TeamScore | None = None
         self._last_bids = self.knowledge.bids.copy()
         self._last_bundles: list[list[int]] = [[] for _ in range(s.n_agents)]
@@ -136,10 +138,7 @@ class Protocol:
         if not self._dirty:
             return
         agents = sorted(self._dirty)
-        plan = self.model.plan(agents, [self.knowledge.paths[i] for i in agents])
-        self._paths.set_rows(agents, plan.timing)
-        self._gain[agents] = plan.gain
-        self._slot[agents] = plan.slot
+        self.model.refresh(agents, [self.knowledge.paths[i] for i in agents], self._paths, self._gain, self._slot)
         self._dirty.clear()
 
     @property
@@ -177,19 +176,23 @@ class Protocol:
         return self._score
 
     # -- Phase 1 decisions ---------------------------------------------------------------------------------------
-    def _quittable(self) -> np.ndarray:
+    def _quittable(self, counts: np.ndarray | None = None) -> np.ndarray:
         """(N, M) the timer-free quit conditions (thesis Alg 9 l. 2–3): L_j > 1, i holds j, i never quit j, and
-        the group is incomplete in i's table. Quitting, the pending-quit test and the timer reset share it."""
+        the group is incomplete in i's table. Quitting, the pending-quit test and the timer reset share it.
+
+        ``counts`` are the member counts n_j of every table; without them, the view's (valid in the bundle phase).
+        """
         kn = self.knowledge
+        counts = self.view().members if counts is None else counts
         return ((self.scenario.task_agents > 1)[None, :] & (kn.own_bids() > 0) & ~kn.quit
-                & (kn.member_counts() < self.scenario.task_agents[None, :]))
+                & (counts < self.scenario.task_agents[None, :]))
 
     def quit_options(self) -> np.ndarray:
         """(N, M) quits the protocol allows now: quittable and the timer ran out, T − H_i[j] > δ (thesis Alg 9 l. 6,
         H_ij < T − δ; article eq. (10)); cached until the next change."""
         if self._quits is None:
             if not self.cfg.task_quitting:
-                self._quits = np.zeros(self.knowledge.quit.shape, dtype=bool)
+                self._quits = self._no_quits
             else:
                 self._quits = self._quittable() & (self.round - self.knowledge.assigned_at > self.cfg.delta)
         return self._quits
@@ -268,8 +271,9 @@ class Protocol:
         c = self.counters
         c.conflicting_bids += int((own_before & (kn.own_bids() <= 0) & self.alive[:, None]).sum())
         self._release_outbid()
+        counts = kn.member_counts() if self.cfg.task_quitting else None
         if self.cfg.task_quitting:
-            self._reset_quit_timers(before)
+            self._reset_quit_timers(before, counts)
         if kn.quit_blocked.any():          # another agent assigned itself to a quit task: the quitter may return
             joined = ((kn.bids > 0) & (before <= 0)).any(axis=1)
             kn.quit_blocked &= ~joined
@@ -286,7 +290,7 @@ class Protocol:
             c.rounds_to_agreement, c.messages_to_agreement = self.round, c.messages
         self._last_bids = kn.bids.copy()
         self._last_bundles = [list(b) for b in kn.bundles]
-        self.stable_rounds = 0 if changed or self._quit_pending() else self.stable_rounds + 1
+        self.stable_rounds = 0 if changed or self._quit_pending(counts) else self.stable_rounds + 1
         self.converged = self.stable_rounds >= self.live_graph.diameter + 1 and self._settled()
         self._touch()
         return traffic
@@ -339,20 +343,21 @@ class Protocol:
                 kn.release(i, lost, self.cfg.release_order)
                 self._dirty.add(i)
 
-    def _reset_quit_timers(self, before: np.ndarray) -> None:
-        """H_i[j] = T when column j of an incomplete held group changed (Alg 9 lines 4–5, ``reset_on``)."""
+    def _reset_quit_timers(self, before: np.ndarray, counts: np.ndarray) -> None:
+        """H_i[j] = T when column j of an incomplete held group changed (Alg 9 lines 4–5, ``reset_on``); ``counts``
+        are the tables' member counts after the exchange."""
         kn = self.knowledge
         if self.cfg.reset_on == "additions":
             updated = ((kn.bids > 0) & ~(before > 0)).any(axis=1)
         else:
             updated = (kn.bids != before).any(axis=1)
-        kn.assigned_at[updated & self._quittable()] = self.round
+        kn.assigned_at[updated & self._quittable(counts)] = self.round
 
-    def _quit_pending(self) -> bool:
+    def _quit_pending(self, counts: np.ndarray | None) -> bool:
         """A quittable task whose timer had not run out in the last bundle phase: a quit may still follow."""
         if not self.cfg.task_quitting:
             return False
-        return bool(np.any(self._quittable() & (self.round - 1 - self.knowledge.assigned_at <= self.cfg.delta)))
+        return bool(np.any(self._quittable(counts) & (self.round - 1 - self.knowledge.assigned_at <= self.cfg.delta)))
 
     def allocation(self) -> Allocation:
         """The allocation as it stands: flown paths with start times, groups, validity, score, the run's figures."""

@@ -32,7 +32,7 @@ import numpy as np
 from taskalloc_env import kernels
 from taskalloc_env.config import TaskAllocConfig
 from taskalloc_env.groups import Equipment
-from taskalloc_env.kernels.plan import plan_paths
+from taskalloc_env.kernels.plan import plan_paths, set_table_rows
 from taskalloc_env.scenario import Scenario
 
 
@@ -67,8 +67,9 @@ class ScoringModel:
         self.marginal_gain = marginal_gain
         self.reward_time = reward_time
         s = scenario
-        self.lam = s.time_discount
-        self.gamma = s.distance_discount
+        self.lam = float(s.time_discount)
+        self.gamma = float(s.distance_discount)
+        self.speed = s.agent_speed.astype(float)
         self.dist_agent_task = np.linalg.norm(s.agent_pos[:, None, :] - s.task_pos[None, :, :], axis=2)
         self.dist_task_task = np.linalg.norm(s.task_pos[:, None, :] - s.task_pos[None, :, :], axis=2)
         self.pay = s.task_reward / s.task_agents if reward_split == "total" else s.task_reward.astype(float)
@@ -110,20 +111,42 @@ class ScoringModel:
         compiled (``kernels.plan.plan_paths``) when numba is there, else ``plan_reference``."""
         if not kernels.COMPILED:
             return self.plan_reference(agents, paths, gains)
+        n_paths = len(paths)
+        gain = np.zeros((n_paths, self.scenario.n_tasks))
+        slot = np.full((n_paths, self.scenario.n_tasks), -1, dtype=np.int64)
+        timing = self._compiled_plan(agents, paths, gains, np.arange(n_paths), gain, slot)
+        return Plan(timing, gain, slot)
+
+    def refresh(self, agents: Sequence[int], paths: Sequence[Sequence[int]], table: PathTable, gain: np.ndarray,
+                slot: np.ndarray) -> None:
+        """Re-time ``paths`` into the rows ``agents`` of ``table`` and recompute those rows of the (N, M) c_ij
+        ``gain`` and n_ij ``slot`` arrays, in place (``plan`` then ``PathTable.set_rows``, without the copies)."""
+        agents = np.asarray(agents, dtype=np.int64)
+        if not kernels.COMPILED:
+            plan = self.plan_reference(agents, paths)
+            table.set_rows(agents, plan.timing)
+            gain[agents], slot[agents] = plan.gain, plan.slot
+            return
+        timing = self._compiled_plan(agents, paths, True, agents, gain, slot)
+        set_table_rows(agents, timing.path, timing.length, timing.reward, timing.start, table.members, table.reward,
+                       table.start)
+        table.cost[agents] = timing.cost.sum(axis=1)      # numpy's summation order, as set_rows sums
+
+    def _compiled_plan(self, agents: Sequence[int], paths: Sequence[Sequence[int]], gains: bool, rows: np.ndarray,
+                       gain: np.ndarray, slot: np.ndarray) -> Timing:
+        """``kernels.plan.plan_paths`` on padded paths: the timing, with c_ij and n_ij written to ``rows``."""
         s = self.scenario
         agents = np.asarray(agents, dtype=np.int64)
         padded, lengths, _ = _pad(paths)
         count, width = padded.shape
         arrival, start, finish, reward, cost = (np.zeros((count, width)) for _ in range(5))
         feasible = np.ones(count, dtype=bool)
-        gain = np.zeros((count, s.n_tasks))
-        slot = np.full((count, s.n_tasks), -1, dtype=np.int64)
-        plan_paths(padded, lengths, s.agent_speed[agents].astype(float), self.dist_agent_task[agents],
-                   self.dist_task_task, self.earliest, self.deadline, self.doable, s.task_duration, s.task_start,
-                   self.pay, float(self.lam), float(self.gamma), self.distance_cost == "leg",
-                   self.reward_time == "arrival", self.marginal_gain == "frozen", gains,
-                   arrival, start, finish, reward, cost, feasible, gain, slot)
-        return Plan(Timing(padded, lengths, arrival, start, finish, reward, cost, feasible), gain, slot)
+        plan_paths(padded, lengths, self.speed[agents], self.dist_agent_task[agents], self.dist_task_task,
+                   self.earliest, self.deadline, self.doable, s.task_duration, s.task_start, self.pay, self.lam,
+                   self.gamma, self.distance_cost == "leg", self.reward_time == "arrival",
+                   self.marginal_gain == "frozen", gains, arrival, start, finish, reward, cost, feasible, rows, gain,
+                   slot)
+        return Timing(padded, lengths, arrival, start, finish, reward, cost, feasible)
 
     def plan_reference(self, agents: Sequence[int], paths: Sequence[Sequence[int]], gains: bool = True) -> Plan:
         """``plan`` in numpy, vectorised over (agent, slot, task) blocks (the reference).

@@ -77,13 +77,14 @@ def _replaceable(m: int, newcomer: int, required: np.ndarray, agent_eq: np.ndarr
 
 @jit
 def _merge_column(out: np.ndarray, sent: np.ndarray, i: int, k: int, s_i: np.ndarray, s_k: np.ndarray,
-                  need: int, restricted: bool, required: np.ndarray, agent_eq: np.ndarray) -> None:
-    """``group_merge.merge`` for one column, in place on ``out`` (the receiver's column)."""
+                  need: int, restricted: bool, required: np.ndarray, agent_eq: np.ndarray,
+                  candidate: np.ndarray) -> None:
+    """``group_merge.merge`` for one column, in place on ``out`` (the receiver's column); ``candidate`` is
+    scratch space of the column's size."""
     n = out.size
     for m in range(n):                                           # pass A: refresh trusted members
         if out[m] > 0 and m != i and (m == k or s_k[m] > s_i[m]):
             out[m] = sent[m]
-    candidate = np.zeros(n, dtype=np.bool_)
     for m in range(n):
         candidate[m] = sent[m] > 0 and out[m] == 0 and m != i and (m == k or s_k[m] > s_i[m])
     while True:                                                  # pass B: best (bid, id) newcomer first
@@ -126,6 +127,7 @@ def exchange_all(bids: np.ndarray, winner: np.ndarray, stamps: np.ndarray, known
     relayed = np.full((n, n), -np.inf)
     informative = 0
     column = np.empty(n)
+    candidate = np.zeros(n, dtype=np.bool_)
     for d in range(receiver.size):
         i, k, q = receiver[d], sender[d], slot[d]
         s_i = stamps[i].copy()
@@ -151,10 +153,14 @@ def exchange_all(bids: np.ndarray, winner: np.ndarray, stamps: np.ndarray, known
                 winner[i, j] = new_z
                 changed = True
             else:
+                same = True
                 for a in range(n):
                     column[a] = bids[i, a, j]
+                    same = same and column[a] == snap_bids[q, k, a, j]
+                if same:                    # an identical column: neither pass changes anything
+                    continue
                 _merge_column(column, snap_bids[q, k, :, j], i, k, s_i, s_k, need[j], restricted[j], required[j],
-                              agent_eq)
+                              agent_eq, candidate)
                 for a in range(n):
                     if column[a] != bids[i, a, j]:
                         bids[i, a, j] = column[a]

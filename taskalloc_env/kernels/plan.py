@@ -32,8 +32,9 @@ def plan_paths(padded: np.ndarray, lengths: np.ndarray, speed: np.ndarray, from_
                duration: np.ndarray, task_start: np.ndarray, pay: np.ndarray, lam: float, gamma: float,
                leg_cost: bool, arrival_time: bool, frozen: bool, gains: bool,
                arrival: np.ndarray, start: np.ndarray, finish: np.ndarray, reward: np.ndarray, cost: np.ndarray,
-               feasible: np.ndarray, gain: np.ndarray, slot: np.ndarray) -> None:
-    """Fill the (A, P) timing arrays, ``feasible`` (A,) and, with ``gains``, c_ij and n_ij (A, M) in place.
+               feasible: np.ndarray, rows: np.ndarray, gain: np.ndarray, slot: np.ndarray) -> None:
+    """Fill the (A, P) timing arrays, ``feasible`` (A,) and, with ``gains``, c_ij and n_ij of path a into row
+    ``rows[a]`` of ``gain`` and ``slot``, in place.
 
     ``from_start`` (A, M) is each agent's distance to every task; ``dist`` (M, M) between tasks. Padding entries of
     the timing arrays stay zero.
@@ -120,8 +121,26 @@ def plan_paths(padded: np.ndarray, lengths: np.ndarray, speed: np.ndarray, from_
                     best = value
                     best_slot = n
             if on_path or not best > 0:
-                gain[a, j] = 0.0
-                slot[a, j] = -1
+                gain[rows[a], j] = 0.0
+                slot[rows[a], j] = -1
             else:
-                gain[a, j] = best
-                slot[a, j] = best_slot
+                gain[rows[a], j] = best
+                slot[rows[a], j] = best_slot
+
+
+@jit
+def set_table_rows(rows: np.ndarray, padded: np.ndarray, lengths: np.ndarray, reward: np.ndarray,
+                   start: np.ndarray, members: np.ndarray, table_reward: np.ndarray, table_start: np.ndarray) -> None:
+    """``PathTable.set_rows`` without the travel cost: path a becomes row ``rows[a]`` of the (N, M) tables."""
+    m = members.shape[1]
+    for a in range(rows.size):
+        i = rows[a]
+        for j in range(m):
+            members[i, j] = False
+            table_reward[i, j] = 0.0
+            table_start[i, j] = np.inf
+        for r in range(lengths[a]):
+            j = padded[a, r]
+            members[i, j] = True
+            table_reward[i, j] = reward[a, r]
+            table_start[i, j] = start[a, r]
