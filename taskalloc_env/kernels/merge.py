@@ -76,41 +76,185 @@ def _replaceable(m: int, newcomer: int, required: np.ndarray, agent_eq: np.ndarr
 
 
 @jit
-def _merge_column(out: np.ndarray, sent: np.ndarray, i: int, k: int, s_i: np.ndarray, s_k: np.ndarray,
-                  need: int, restricted: bool, required: np.ndarray, agent_eq: np.ndarray,
-                  candidate: np.ndarray) -> None:
-    """``group_merge.merge`` for one column, in place on ``out`` (the receiver's column); ``candidate`` is
-    scratch space of the column's size."""
-    n = out.size
-    for m in range(n):                                           # pass A: refresh trusted members
-        if out[m] > 0 and m != i and (m == k or s_k[m] > s_i[m]):
-            out[m] = sent[m]
-    for m in range(n):
-        candidate[m] = sent[m] > 0 and out[m] == 0 and m != i and (m == k or s_k[m] > s_i[m])
-    while True:                                                  # pass B: best (bid, id) newcomer first
-        newcomer = -1
-        for m in range(n - 1, -1, -1):
-            if candidate[m] and (newcomer < 0 or sent[m] > sent[newcomer]):
-                newcomer = m
-        if newcomer < 0:
-            return
-        candidate[newcomer] = False
-        bid = sent[newcomer]
-        count = 0
-        for m in range(n):
-            if out[m] > 0:
-                count += 1
-        if count < need and (not restricted or _slot_open(out, newcomer, required, agent_eq)):
-            out[newcomer] = bid
+def _members(bids: np.ndarray, single: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every multi-agent column of every table in (H, N, M) ``bids`` as a member list: (H, M) counts and
+    (H, M, width) member ids in increasing order with their bids."""
+    h, n, m = bids.shape
+    count = np.zeros((h, m), dtype=np.int64)
+    ids = np.zeros((h, m, width), dtype=np.int64)
+    values = np.zeros((h, m, width))
+    for t in range(h):
+        for k in range(n):
+            for j in range(m):
+                if not single[j] and bids[t, k, j] > 0:
+                    c = count[t, j]
+                    ids[t, j, c] = k
+                    values[t, j, c] = bids[t, k, j]
+                    count[t, j] = c + 1
+    return count, ids, values
+
+
+@jit
+def _most_members(bids: np.ndarray, single: np.ndarray) -> int:
+    """The largest member count of any multi-agent column of (H, N, M) ``bids``."""
+    h, n, m = bids.shape
+    most = 0
+    count = np.zeros(m, dtype=np.int64)
+    for t in range(h):
+        count[:] = 0
+        for k in range(n):
+            for j in range(m):
+                if bids[t, k, j] > 0:
+                    count[j] += 1
+        for j in range(m):
+            if not single[j]:
+                most = max(most, count[j])
+    return most
+
+
+@jit
+def _value_of(agent: int, count: int, ids: np.ndarray, values: np.ndarray) -> float:
+    """The bid of ``agent`` in a member list (0 if it is not a member)."""
+    for c in range(count):
+        if ids[c] == agent:
+            return values[c]
+    return 0.0
+
+
+@jit
+def _list_slot_open(count: int, ids: np.ndarray, newcomer: int, required: np.ndarray, agent_eq: np.ndarray) -> bool:
+    """``Equipment.slot_open`` on a member list."""
+    for e in range(required.size):
+        if required[e] > 0 and agent_eq[newcomer, e]:
+            have = 0
+            for c in range(count):
+                if agent_eq[ids[c], e]:
+                    have += 1
+            if required[e] > have:
+                return True
+    return False
+
+
+@jit
+def _merge_members(count: int, ids: np.ndarray, values: np.ndarray, sent_count: int, sent_ids: np.ndarray,
+                   sent_values: np.ndarray, i: int, k: int, s_i: np.ndarray, s_k: np.ndarray, need: int,
+                   restricted: bool, required: np.ndarray, agent_eq: np.ndarray, taken: np.ndarray) -> int:
+    """``group_merge.merge`` for one column held as member lists, in place on the receiver's (``ids``,
+    ``values``, kept in increasing id order); returns its new member count. ``taken`` is scratch space."""
+    kept = 0
+    for c in range(count):                                       # pass A: refresh trusted members
+        m, v = ids[c], values[c]
+        if m != i and (m == k or s_k[m] > s_i[m]):
+            v = _value_of(m, sent_count, sent_ids, sent_values)
+        if v > 0:
+            ids[kept], values[kept] = m, v
+            kept += 1
+    count = kept
+    for c in range(sent_count):                                  # pass B candidates: trusted non-members
+        m = sent_ids[c]
+        taken[c] = m == i or not (m == k or s_k[m] > s_i[m]) or _value_of(m, count, ids, values) > 0
+    while True:                                                  # best (bid, id) newcomer first
+        best = -1
+        for c in range(sent_count - 1, -1, -1):
+            if not taken[c] and (best < 0 or sent_values[c] > sent_values[best]):
+                best = c
+        if best < 0:
+            return count
+        taken[best] = True
+        newcomer, bid = sent_ids[best], sent_values[best]
+        if count < need and (not restricted or _list_slot_open(count, ids, newcomer, required, agent_eq)):
+            count = _insert(count, ids, values, newcomer, bid)
             continue
         lowest = -1
-        for m in range(n):
-            victim = out[m] > 0 and (not restricted or _replaceable(m, newcomer, required, agent_eq))
-            if victim and (lowest < 0 or out[m] < out[lowest]):
-                lowest = m
-        if lowest >= 0 and _outbids(bid, newcomer, out[lowest], lowest):
-            out[lowest] = 0.0
-            out[newcomer] = bid
+        for c in range(count):
+            victim = not restricted or _replaceable(ids[c], newcomer, required, agent_eq)
+            if victim and (lowest < 0 or values[c] < values[lowest]):
+                lowest = c
+        if lowest >= 0 and _outbids(bid, newcomer, values[lowest], ids[lowest]):
+            for c in range(lowest, count - 1):                   # drop the displaced member
+                ids[c], values[c] = ids[c + 1], values[c + 1]
+            count = _insert(count - 1, ids, values, newcomer, bid)
+
+
+@jit
+def _insert(count: int, ids: np.ndarray, values: np.ndarray, agent: int, value: float) -> int:
+    """Insert (agent, value) into a member list kept in increasing id order; returns the new count."""
+    c = count
+    while c > 0 and ids[c - 1] > agent:
+        ids[c], values[c] = ids[c - 1], values[c - 1]
+        c -= 1
+    ids[c], values[c] = agent, value
+    return count + 1
+
+
+@jit
+def _column_hash(count: int, ids: np.ndarray, values: np.ndarray) -> np.int64:
+    """A 64-bit fingerprint of a member list (ids and the exact bits of the bids)."""
+    h = np.uint64(count) * np.uint64(0x9E3779B97F4A7C15)
+    bits = values.view(np.uint64)
+    for c in range(count):
+        h = (h ^ np.uint64(ids[c])) * np.uint64(0x100000001B3)
+        h = (h ^ bits[c]) * np.uint64(0x100000001B3)
+    return np.int64(h >> np.uint64(1))
+
+
+@jit
+def _same_members(count_a: int, ids_a: np.ndarray, values_a: np.ndarray, count_b: int, ids_b: np.ndarray,
+                  values_b: np.ndarray) -> bool:
+    if count_a != count_b:
+        return False
+    for c in range(count_a):  # noqa: SIM110 - compiled: an explicit loop, not a generator
+        if ids_a[c] != ids_b[c] or values_a[c] != values_b[c]:
+            return False
+    return True
+
+
+@jit
+def _intern_sent(count: np.ndarray, ids: np.ndarray, values: np.ndarray, single: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Number the distinct multi-agent columns of the sent tables: (H, M) content ids (equal ids ⇔ equal columns)
+    and an open-addressing table (fingerprint → representative column) to look receivers' columns up in."""
+    h, m = count.shape
+    size = 1
+    while size < 4 * h * m:
+        size *= 2
+    keys = np.full(size, -1, dtype=np.int64)
+    owner = np.zeros(size, dtype=np.int64)                      # t * m + j of the representative
+    content = np.full((h, m), -1, dtype=np.int64)
+    for t in range(h):
+        for j in range(m):
+            if single[j]:
+                continue
+            key = _column_hash(count[t, j], ids[t, j], values[t, j])
+            slot = key & (size - 1)
+            while True:
+                if keys[slot] == -1:                            # a new content: this column represents it
+                    keys[slot], owner[slot] = key, t * m + j
+                    content[t, j] = t * m + j
+                    break
+                r_t, r_j = owner[slot] // m, owner[slot] % m
+                if keys[slot] == key and _same_members(count[t, j], ids[t, j], values[t, j], count[r_t, r_j],
+                                                       ids[r_t, r_j], values[r_t, r_j]):
+                    content[t, j] = owner[slot]
+                    break
+                slot = (slot + 1) & (size - 1)
+    return content, keys, owner
+
+
+@jit
+def _lookup(count: int, ids: np.ndarray, values: np.ndarray, keys: np.ndarray, owner: np.ndarray, m: int,
+            sent_count: np.ndarray, sent_ids: np.ndarray, sent_values: np.ndarray) -> np.int64:
+    """The content id of a receiver's column if some sent column holds exactly the same members, else −1."""
+    key = _column_hash(count, ids, values)
+    size = keys.size
+    slot = key & (size - 1)
+    while keys[slot] != -1:
+        r_t, r_j = owner[slot] // m, owner[slot] % m
+        if keys[slot] == key and _same_members(count, ids, values, sent_count[r_t, r_j], sent_ids[r_t, r_j],
+                                               sent_values[r_t, r_j]):
+            return owner[slot]
+        slot = (slot + 1) & (size - 1)
+    return np.int64(-1)
 
 
 @jit
@@ -126,11 +270,26 @@ def exchange_all(bids: np.ndarray, winner: np.ndarray, stamps: np.ndarray, known
     n, _, m = bids.shape
     relayed = np.full((n, n), -np.inf)
     informative = 0
-    column = np.empty(n)
-    candidate = np.zeros(n, dtype=np.bool_)
+    # multi-agent columns as member lists (at most L_j members each): a message costs O(M · L), not O(M · N)
+    width = max(need.max(), _most_members(bids, single), _most_members(snap_bids.reshape(-1, n, m), single)) + 1
+    count, ids, values = _members(bids, single, width)
+    sent_count, sent_ids, sent_values = _members(snap_bids.reshape(-1, n, m), single, width)
+    # equal columns share a content id, so an unchanged column costs one comparison per message
+    sent_content, keys, owner = _intern_sent(sent_count, sent_ids, sent_values, single)
+    content = np.full((n, m), -1, dtype=np.int64)
+    for i in range(n):
+        for j in range(m):
+            if not single[j]:
+                content[i, j] = _lookup(count[i, j], ids[i, j], values[i, j], keys, owner, m, sent_count, sent_ids,
+                                        sent_values)
+    before_ids = np.empty(width, dtype=np.int64)
+    before_values = np.empty(width)
+    taken = np.zeros(width, dtype=np.bool_)
+    s_i = np.empty(n)
     for d in range(receiver.size):
         i, k, q = receiver[d], sender[d], slot[d]
-        s_i = stamps[i].copy()
+        t = q * n + k                                            # the sender's table in the stacked snapshots
+        s_i[:] = stamps[i]
         s_k = snap_stamps[q, k]
         changed = False
         for j in range(m):
@@ -152,19 +311,26 @@ def exchange_all(bids: np.ndarray, winner: np.ndarray, stamps: np.ndarray, known
                     bids[i, new_z, j] = new_y
                 winner[i, j] = new_z
                 changed = True
-            else:
-                same = True
-                for a in range(n):
-                    column[a] = bids[i, a, j]
-                    same = same and column[a] == snap_bids[q, k, a, j]
-                if same:                    # an identical column: neither pass changes anything
-                    continue
-                _merge_column(column, snap_bids[q, k, :, j], i, k, s_i, s_k, need[j], restricted[j], required[j],
-                              agent_eq, candidate)
-                for a in range(n):
-                    if column[a] != bids[i, a, j]:
-                        bids[i, a, j] = column[a]
-                        changed = True
+                continue
+            if content[i, j] >= 0 and content[i, j] == sent_content[t, j]:
+                continue                    # an identical column: neither pass changes anything
+            c_i, c_k = count[i, j], sent_count[t, j]
+            for c in range(c_i):
+                before_ids[c], before_values[c] = ids[i, j, c], values[i, j, c]
+            c_new = _merge_members(c_i, ids[i, j], values[i, j], c_k, sent_ids[t, j], sent_values[t, j], i, k,
+                                   s_i, s_k, need[j], restricted[j], required[j], agent_eq, taken)
+            count[i, j] = c_new
+            same = c_new == c_i
+            for c in range(c_i if same else 0):
+                same = same and ids[i, j, c] == before_ids[c] and values[i, j, c] == before_values[c]
+            if not same:
+                for c in range(c_i):
+                    bids[i, before_ids[c], j] = 0.0
+                for c in range(c_new):
+                    bids[i, ids[i, j, c], j] = values[i, j, c]
+                content[i, j] = _lookup(c_new, ids[i, j], values[i, j], keys, owner, m, sent_count, sent_ids,
+                                        sent_values)
+                changed = True
         stamps[i, k] = now
         for a in range(n):
             known[i, a] = known[i, a] or snap_known[q, k, a]
