@@ -499,9 +499,17 @@ def heatmap_tables(exp: Experiment, cells: Mapping, points: Sequence[Point], lev
         what = "percentage points" if " minus " in title else f"% change of the mean {METRIC_LABELS[heat.metric]}"
         head = f"{title} ({what}; rows {heat.rows}, columns {heat.columns})"
         head = f"{level} {head}\n\n" if level.startswith("#") else f"**Ours, {head}:**\n\n"
-        body = [[r, *("n/a" if np.isnan(v) else f"{v:+.1f}" for v in table[k])] for k, r in enumerate(rows)]
+        body = [[r, *(_signed(v) for v in table[k])] for k, r in enumerate(rows)]
         parts.append(head + markdown_table([f"{heat.rows} \\ {heat.columns}", *cols], body))
     return "\n".join(parts)
+
+
+def _signed(value: float) -> str:
+    """``+1.2`` / ``-3.4``; ``0.0`` for anything that rounds to zero; ``n/a`` for a cell that was not run."""
+    if np.isnan(value):
+        return "n/a"
+    text = f"{value:+.1f}"
+    return "0.0" if text in ("+0.0", "-0.0") else text
 
 
 def heatmap_figures(exp: Experiment, cells: Mapping, points: Sequence[Point], target: Path,

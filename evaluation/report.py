@@ -200,12 +200,12 @@ def heatmap_plot(path: Path, table: np.ndarray, rows: Sequence[Any], cols: Seque
         if np.isfinite(v):
             low = (v - finite.min()) / max(np.ptp(finite), 1e-9) if not diverging else 0.5 + v / (2 * span or 1)
             colour = "white" if (not diverging and low < 0.5) or (diverging and abs(low - 0.5) > 0.3) else "black"
-            ax.text(c, r, f"{v:.0f}", ha="center", va="center", fontsize=7, color=colour)
+            ax.text(c, r, f"{v:.0f}" if abs(v) >= 0.5 else "0", ha="center", va="center", fontsize=7, color=colour)
     ax.set_xticks(range(len(cols)), [str(c) for c in cols])
     ax.set_yticks(range(len(rows)), [str(r) for r in rows])
     ax.set_xlabel(col_label)
     ax.set_ylabel(row_label)
-    ax.set_title(textwrap.fill(title, 60), fontsize=9)
+    ax.set_title("\n".join(textwrap.fill(line, 60) for line in title.split("\n")), fontsize=9)
     fig.colorbar(image, ax=ax, label="%" if not diverging else "percentage points")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
