@@ -1,7 +1,9 @@
 """Paired evaluation: several solvers on the same seeds, one row of figures per episode, parallel over processes.
 
 A *solver* is a policy name (``random``, ``cbba``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi``,
-``learned:<checkpoint>``, see ``policies.make_policy``) or a centralised solver (``sgama``, ``exact``). Seed s
+``learned:<checkpoint>``, see ``policies.make_policy``), a centralised solver (``sgama``, ``exact``), or
+``cbba-duo`` (preferred-duo CBBA, ``policies.duo``: every task of the single-agent instance split into a lead and a
+helper part, messages and rounds counted as for any policy). Seed s
 generates the same scenario instance for every solver (the paired design of thesis §5.3.1): the environment
 draws the instance from ``reset(seed=s)`` before any policy acts, and each row carries a fingerprint of the instance
 so that the pairing can be checked. Policies that need protocol options (``env_overrides``, e.g. task quitting)
@@ -35,11 +37,14 @@ from tqdm import tqdm
 from policies import exact, make_policy, rollout, sgama
 from policies.base import Policy
 from policies.centralised import MAX_AGENTS, MAX_TASKS
+from policies.duo import preferred_duo_cbba
 from taskalloc_env import Scenario, TaskAllocConfig, TaskAllocEnv
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import max_required_agents
 
 CENTRALISED = {"sgama": ("SGAMA", sgama), "exact": ("exact", exact)}
+# solvers that run a protocol on a transformed instance: (display name, solver(scenario, config) -> Allocation)
+SOLVERS = {"cbba-duo": ("CBBA preferred duo", preferred_duo_cbba)}
 METRICS = ("score", "valid_tasks", "conflicts", "rounds", "messages", "comm_steps", "rounds_to_agreement",
            "comm_steps_to_agreement", "invalid_actions", "informative_messages", "data_items", "bids", "quits",
            "messages_lost", "messages_delayed", "data_received_per_agent", "data_sent_per_agent",
@@ -68,6 +73,8 @@ def skip_reason(solver: str, cfg: TaskAllocConfig) -> str | None:
     key = solver.lower()
     if key == "cbba" and max_required_agents(cfg) > 1:
         return "CBBA assigns single-agent tasks only (every L_j = 1)"
+    if key == "cbba-duo" and (max_required_agents(cfg) > 1 or cfg.prerequisites or cfg.comm_range is not None):
+        return "preferred-duo CBBA splits single-agent tasks without prerequisites, with full communication"
     if key == "exact" and (cfg.n_agents > MAX_AGENTS or cfg.n_tasks > MAX_TASKS):
         return f"exact enumerates; at most {MAX_AGENTS} agents x {MAX_TASKS} tasks"
     return None
@@ -78,6 +85,8 @@ def solver_name(solver: str) -> str:
     key = solver.lower()
     if key in CENTRALISED:
         return CENTRALISED[key][0]
+    if key in SOLVERS:
+        return SOLVERS[key][0]
     return policy_for(solver).name
 
 
@@ -87,12 +96,28 @@ def policy_for(solver: str) -> Policy:
     return make_policy(solver)
 
 
+def policy_overrides(solver: str, cfg: TaskAllocConfig) -> dict[str, Any]:
+    """The protocol options ``solver`` needs on top of ``cfg`` (its ``env_overrides``).
+
+    A policy that pins an option (a learned policy trained with ``delta=1``) may not silently overrule a value the
+    config sets away from the default (a δ sweep): that is an error naming both. The scripted CBGA+TQ and CBGABI
+    pin nothing but ``task_quitting`` and take δ from the config, so a sweep over ``delta`` reaches them.
+    """
+    if solver.lower() in CENTRALISED or solver.lower() in SOLVERS:
+        return {}
+    overrides = policy_for(solver).env_overrides
+    clash = {k: (getattr(cfg, k), v) for k, v in overrides.items()
+             if getattr(cfg, k) != v and getattr(cfg, k) != getattr(TaskAllocConfig, k)}
+    if clash:
+        detail = ", ".join(f"{k}={have!r} (the policy needs {want!r})" for k, (have, want) in clash.items())
+        raise ValueError(f"{solver}: the config sets {detail}; the policy would overrule it")
+    return overrides
+
+
 @functools.cache
 def _env(solver: str, cfg: TaskAllocConfig) -> TaskAllocEnv:
     """One environment per (solver, config) and process, reused across seeds (reset draws a fresh instance)."""
-    key = solver.lower()
-    overrides = {} if key in CENTRALISED else policy_for(solver).env_overrides
-    return TaskAllocEnv(cfg, **overrides)
+    return TaskAllocEnv(cfg, **policy_overrides(solver, cfg))
 
 
 def fingerprint(scenario: Scenario) -> str:
@@ -107,12 +132,13 @@ def fingerprint(scenario: Scenario) -> str:
 def solve(solver: str | Policy, env: TaskAllocEnv, seed: int) -> Allocation:
     """Solve instance ``seed`` of ``env``: roll a policy out, or hand the instance to a centralised solver.
 
-    ``solver`` is a name (a policy, ``sgama`` or ``exact``) or a policy object; ``env`` must carry the policy's
-    ``env_overrides``.
+    ``solver`` is a name (a policy, ``sgama``, ``exact`` or ``cbba-duo``) or a policy object; ``env`` must carry the
+    policy's ``env_overrides``.
     """
-    if isinstance(solver, str) and solver.lower() in CENTRALISED:
+    table = {**CENTRALISED, **SOLVERS}
+    if isinstance(solver, str) and solver.lower() in table:
         env.reset(seed=seed)
-        return CENTRALISED[solver.lower()][1](env.unwrapped.scenario, env.config)
+        return table[solver.lower()][1](env.unwrapped.scenario, env.config)
     policy = policy_for(solver) if isinstance(solver, str) else solver
     return rollout(env, policy, seed=seed)
 

@@ -15,21 +15,27 @@ and ``run.json`` (package versions, commit, wall time). A full run also rewrites
 ``--quick`` runs 2 seeds at ≤ 3 sweep points into ``results/tmp/quick`` and leaves the docs alone.
 
 Experiment YAML keys: ``name``, ``title``, ``source``, ``scenario`` (scenario name or path), ``overrides`` (config
-fields), ``sweep`` (``{field, values, label}`` or ``{points: [mapping…], x, label}``; a point's ``label`` key names
-it), ``series`` (solver names or ``{solver, label, overrides}``), ``baseline`` (a series label), ``metrics``,
-``episodes``, ``headline`` (points to tabulate and bar-plot in the docs), ``published`` (markdown),
-``checks`` (``{claim, a, b, test: greater|less|same|ratio_above|ratio_below, metric, at, alpha, ratio}``),
-``quick`` (``{points: [...], episodes}``), ``marks`` (``[{metric, share, label}]``: a vertical line in every sweep
-plot at the first point where at least ``share`` of the episodes have the yes/no ``metric``, e.g. where the network
-becomes connected, thesis Figs 4.6–4.7), ``reference`` (``{point, metrics}``: every series at every point paired
-against the same series at the reference point on the same seeds — Δ with its 95 % interval, ratio, p-values —
-with a plot of the differences per metric, e.g. each message-loss rate against perfect links).
+fields), ``sweep`` (``{field, values, label}``, ``{points: [mapping…], x, label}``, a point's ``label`` key naming
+it, or ``{grid: {field: values, field: values}, label}``, every combination, labelled ``a × b``), ``series`` (solver
+names or ``{solver, label, overrides}``), ``baseline`` (a series label), ``metrics``, ``episodes``, ``headline``
+(points to tabulate and bar-plot in the docs; the paired table there also shows the comm-step metrics listed in
+``metrics``, under both stopping rules), ``published`` (markdown), ``checks`` (``{claim, a, b,
+test: greater|less|same|ratio_above|ratio_below, metric, at, alpha, ratio}``), ``quick`` (``{points: [...],
+episodes}``), ``marks`` (``[{metric, share, label}]``: a vertical line in every sweep plot at the first point where at
+least ``share`` of the episodes have the yes/no ``metric``, e.g. where the network becomes connected, thesis Figs
+4.6–4.7), ``reference`` (``{point, metrics}``: every series at every point paired against the same series at the
+reference point on the same seeds — Δ with its 95 % interval, ratio, p-values — with a plot of the differences per
+metric, e.g. each message-loss rate against perfect links), ``heatmap`` (with a two-field grid: ``{baseline, series:
+[...], difference: [a, b], metric}``, the percent change of each series' mean over the baseline's per grid cell and
+the difference of two such maps, as tables and heat-map PNGs; the docs then show these maps instead of the per-point
+tables, and no sweep plots are drawn, so ``marks`` cannot go with it).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import json
 import os
 import platform
@@ -55,6 +61,7 @@ from evaluation.report import (
     bar_and_differences,
     cell_text,
     compare_cells,
+    heatmap_plot,
     markdown_table,
     not_converged,
     paired_columns,
@@ -72,7 +79,9 @@ from taskalloc_env.errors import ConfigError, run_cli
 ROOT = Path(__file__).resolve().parent.parent   # the checkout (for the git commit of a run), if this is one
 RESULTS, DOCS = Path("results"), Path("docs") / "results.md"     # relative to where the command runs
 KEYS = {"name", "title", "source", "scenario", "overrides", "sweep", "series", "baseline", "metrics", "episodes",
-        "headline", "published", "checks", "quick", "marks", "reference"}
+        "headline", "published", "checks", "quick", "marks", "reference", "heatmap"}
+COMM_METRICS = ("comm_steps", "comm_steps_to_agreement")     # one message per agent, to the end / to agreement
+COMM_HEADER = {"comm_steps": "comm steps (end)", "comm_steps_to_agreement": "comm steps (agreement)"}
 TESTS = ("greater", "less", "same", "ratio_above", "ratio_below")
 PACKAGES = ("taskalloc", "numpy", "scipy", "pettingzoo", "gymnasium", "matplotlib", "pyyaml", "tqdm")
 
@@ -126,6 +135,18 @@ class Reference:
     metrics: tuple[str, ...]
 
 
+@dataclasses.dataclass(frozen=True)
+class Heatmap:
+    """Percent change over ``baseline`` per cell of a two-field grid (``rows`` × ``columns``), and one difference."""
+
+    rows: str
+    columns: str
+    baseline: str
+    series: tuple[str, ...]
+    difference: tuple[str, str] | None = None
+    metric: str = "score"
+
+
 @dataclasses.dataclass
 class Experiment:
     """One experiment file, parsed and validated."""
@@ -149,6 +170,7 @@ class Experiment:
     raw: dict[str, Any]
     marks: list[Mark] = dataclasses.field(default_factory=list)
     reference: Reference | None = None
+    heatmap: Heatmap | None = None
 
     def config(self, point: Point, series: Series) -> TaskAllocConfig:
         """The environment config of one cell: scenario < experiment overrides < point < series."""
@@ -161,6 +183,12 @@ class Experiment:
 def _points(sweep: Mapping[str, Any] | None) -> tuple[list[Point], str]:
     if not sweep:
         return [Point("all", "all", {})], ""
+    if "grid" in sweep:
+        fields = list(sweep["grid"])
+        combos = itertools.product(*(sweep["grid"][f] for f in fields))
+        points = [Point(" × ".join(_label(v) for v in combo), " × ".join(_label(v) for v in combo),
+                        dict(zip(fields, combo))) for combo in combos]
+        return points, sweep.get("label", " × ".join(fields))
     if "field" in sweep:
         field = sweep["field"]
         points = [Point(_label(v), v, {field: v}) for v in sweep["values"]]
@@ -234,6 +262,7 @@ def load_experiment(name_or_path: str | Path) -> Experiment:
         if c.test not in TESTS:
             raise ValueError(f"{path}: check test {c.test!r} is not one of {TESTS}")
         _select(points, c.at, f"{path} check {c.claim!r}")
+    heatmap = _heatmap(raw.get("heatmap"), raw.get("sweep"), labels, path)
     quick = raw.get("quick") or {}
     quick_points = _select(points, quick["points"], f"{path} quick") if "points" in quick else \
         [points[i] for i in sorted({0, len(points) // 2, len(points) - 1})]
@@ -244,7 +273,9 @@ def load_experiment(name_or_path: str | Path) -> Experiment:
         episodes=int(raw.get("episodes", 100)), headline=_select(points, _as_list(raw.get("headline")), str(path)),
         published=str(raw.get("published", "")).strip(), checks=checks, quick_points=quick_points,
         quick_episodes=int(quick.get("episodes", 2)), raw=raw, marks=_marks(raw.get("marks"), path),
-        reference=_reference(raw.get("reference"), points, path))
+        reference=_reference(raw.get("reference"), points, path), heatmap=heatmap)
+    if exp.marks and exp.heatmap:
+        raise ValueError(f"{path}: marks are lines in the sweep plots, which a heatmap experiment does not draw")
     for point in points:
         for s in series:
             exp.config(point, s)
@@ -276,6 +307,25 @@ def _reference(raw: Any, points: list[Point], path: Any) -> Reference | None:
         raise ValueError(f"{path}: reference is {{point, metrics}}, got {raw!r}")
     point = _select(points, [raw["point"]], f"{path} reference")[0]
     return Reference(point, tuple(_as_list(raw.get("metrics")) or ["score"]))
+
+
+def _heatmap(spec: Mapping[str, Any] | None, sweep: Mapping[str, Any] | None, labels: Sequence[str],
+             path: Any) -> Heatmap | None:
+    if not spec:
+        return None
+    grid = (sweep or {}).get("grid") or {}
+    if len(grid) != 2:
+        raise ValueError(f"{path}: heatmap needs a sweep over a grid of two fields")
+    rows, columns = list(grid)
+    difference = tuple(spec["difference"]) if spec.get("difference") else None
+    heat = Heatmap(rows=rows, columns=columns, baseline=spec["baseline"], series=tuple(spec["series"]),
+                   difference=difference, metric=spec.get("metric", "score"))  # type: ignore[arg-type]
+    for name in [heat.baseline, *heat.series, *(difference or ())]:
+        if name not in labels:
+            raise ValueError(f"{path}: heatmap names {name!r}, not a series label ({list(labels)})")
+    if difference and (len(difference) != 2 or not set(difference) <= set(heat.series)):
+        raise ValueError(f"{path}: heatmap difference must name two of its series, got {difference!r}")
+    return heat
 
 
 def _as_list(value: Any) -> list:
@@ -381,7 +431,9 @@ def metric_table(exp: Experiment, cells: Mapping, points: Sequence[Point], metri
 
 def paired_table(exp: Experiment, cells: Mapping, points: Sequence[Point], metric: str = "score") -> str:
     """Every series against the baseline at each point: mean ± sd, Δ, ratio, p-values, share won and tied."""
-    header = [exp.xlabel or "setting", "series", METRIC_LABELS[metric], *PAIRED_HEADER, "not conv."]
+    comm = [m for m in COMM_METRICS if m in exp.metrics]
+    header = [exp.xlabel or "setting", "series", METRIC_LABELS[metric], *PAIRED_HEADER,
+              *(COMM_HEADER[m] for m in comm), "not conv."]
     body = []
     for p in points:
         base = cells.get((p.label, exp.baseline))
@@ -392,7 +444,8 @@ def paired_table(exp: Experiment, cells: Mapping, points: Sequence[Point], metri
             paired_cols = ["–"] * len(PAIRED_HEADER)
             if base is not None and s.label != exp.baseline:
                 paired_cols = paired_columns(compare_cells(cell, base, metric), METRIC_DIGITS.get(metric, 1))
-            body.append([p.label, s.label, cell_text(cell, metric), *paired_cols, not_converged(cell)])
+            body.append([p.label, s.label, cell_text(cell, metric), *paired_cols,
+                         *(cell_text(cell, m) for m in comm), not_converged(cell)])
     return markdown_table(header, body, align="ll" + "r" * (len(header) - 2))
 
 
@@ -495,7 +548,9 @@ def write_reports(exp: Experiment, rows: Sequence[Mapping[str, Any]], target: Pa
     seeds_run = max((len(c) for c in cells.values()), default=0)
     figures = []
     marks = mark_points(exp, cells, points)
-    if len(points) > 1:
+    if exp.heatmap:
+        figures += heatmap_figures(exp, cells, points, target, seeds_run)
+    elif len(points) > 1:
         for metric in exp.metrics:
             series = {s.label: [cells.get((p.label, s.label), []) for p in points] for s in exp.series}
             sweep_plot(target / f"{metric}.png", [p.x for p in points], series, metric, exp.xlabel,
@@ -522,6 +577,8 @@ def write_reports(exp: Experiment, rows: Sequence[Mapping[str, Any]], target: Pa
     sections = [f"# {exp.title}\n", f"Source: {exp.source}. {seeds_run} paired seeds per cell.\n"]
     for metric in exp.metrics:
         sections.append(f"## {METRIC_LABELS[metric]} ({_how(metric)})\n\n" + metric_table(exp, cells, points, metric))
+    if exp.heatmap:
+        sections.append(heatmap_tables(exp, cells, points, level="##"))
     if exp.baseline:
         sections.append(f"## Paired against {exp.baseline} (score)\n\n" + paired_table(exp, cells, points))
     if ref is not None:
@@ -538,6 +595,64 @@ def write_reports(exp: Experiment, rows: Sequence[Mapping[str, Any]], target: Pa
     if docs is not None:
         block = _docs_block(exp, cells, points, headline, figures, target, docs, rows, skipped, marks, ref)
         update_docs(docs, exp.name, exp.title, block)
+
+
+def heatmap_maps(exp: Experiment, cells: Mapping, points: Sequence[Point]) -> tuple[list, list, dict[str, Any]]:
+    """Row values, column values and, per map title, the (R, C) array of percent changes (nan where not run)."""
+    heat = exp.heatmap
+    assert heat is not None
+    grid = exp.raw["sweep"]["grid"]
+    rows, cols = list(grid[heat.rows]), list(grid[heat.columns])
+    maps: dict[str, Any] = {}
+    for label in heat.series:
+        table = np.full((len(rows), len(cols)), np.nan)
+        for p in points:
+            a, b = cells.get((p.label, label)), cells.get((p.label, heat.baseline))
+            if a and b:
+                pc = compare_cells(a, b, heat.metric)
+                table[rows.index(p.overrides[heat.rows]), cols.index(p.overrides[heat.columns])] = 100 * (pc.ratio - 1)
+        maps[f"{label} over {heat.baseline}"] = table
+    if heat.difference:
+        a, b = heat.difference
+        maps[f"{a} minus {b}"] = maps[f"{a} over {heat.baseline}"] - maps[f"{b} over {heat.baseline}"]
+    return rows, cols, maps
+
+
+def heatmap_tables(exp: Experiment, cells: Mapping, points: Sequence[Point], level: str = "##") -> str:
+    """One markdown table per map: rows × columns of the grid, percent change of the mean (1 decimal)."""
+    heat = exp.heatmap
+    assert heat is not None
+    rows, cols, maps = heatmap_maps(exp, cells, points)
+    parts = []
+    for title, table in maps.items():
+        what = "percentage points" if " minus " in title else f"% change of the mean {METRIC_LABELS[heat.metric]}"
+        head = f"{title} ({what}; rows {heat.rows}, columns {heat.columns})"
+        head = f"{level} {head}\n\n" if level.startswith("#") else f"**Ours, {head}:**\n\n"
+        body = [[r, *(_signed(v) for v in table[k])] for k, r in enumerate(rows)]
+        parts.append(head + markdown_table([f"{heat.rows} \\ {heat.columns}", *cols], body))
+    return "\n".join(parts)
+
+
+def _signed(value: float) -> str:
+    """``+1.2`` / ``-3.4``; ``0.0`` for anything that rounds to zero; ``n/a`` for a cell that was not run."""
+    if np.isnan(value):
+        return "n/a"
+    text = f"{value:+.1f}"
+    return "0.0" if text in ("+0.0", "-0.0") else text
+
+
+def heatmap_figures(exp: Experiment, cells: Mapping, points: Sequence[Point], target: Path,
+                    seeds_run: int) -> list[str]:
+    heat = exp.heatmap
+    assert heat is not None
+    rows, cols, maps = heatmap_maps(exp, cells, points)
+    names = []
+    for title, table in maps.items():
+        name = f"heatmap_{_slug(title)}.png"
+        heatmap_plot(target / name, table, rows, cols, heat.rows, heat.columns,
+                     f"{exp.title}\n{title}, % ({seeds_run} paired seeds per cell)", diverging=" minus " in title)
+        names.append(name)
+    return names
 
 
 def _convergence_note(rows: Sequence[Mapping[str, Any]], skipped: Sequence[str]) -> str:
@@ -562,9 +677,12 @@ def _docs_block(exp: Experiment, cells: Mapping, points: Sequence[Point], headli
              f"Full tables: [{rel}/table.md]({rel}/table.md), per-episode data: `{rel}/episodes.csv`.*\n"]
     if exp.published:
         parts.append(f"**Published:** {exp.published}\n")
-    for metric in exp.metrics:
-        parts.append(f"**Ours, {METRIC_LABELS[metric]}** ({_how(metric)}):\n\n"
-                     + metric_table(exp, cells, points, metric))
+    if exp.heatmap:         # the maps stand for the per-point tables (in table.md)
+        parts.append(heatmap_tables(exp, cells, points, level="bold"))
+    else:
+        for metric in exp.metrics:
+            parts.append(f"**Ours, {METRIC_LABELS[metric]}** ({_how(metric)}):\n\n"
+                         + metric_table(exp, cells, points, metric))
     if exp.baseline and headline:
         parts.append(f"**Ours, paired against {exp.baseline}** at the headline setting:\n\n"
                      + paired_table(exp, cells, headline))

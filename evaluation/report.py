@@ -249,3 +249,30 @@ def reference_plot(path: Path, xs: Sequence[Any], diffs: Mapping[str, Sequence[P
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def heatmap_plot(path: Path, table: np.ndarray, rows: Sequence[Any], cols: Sequence[Any], row_label: str,
+                 col_label: str, title: str = "", diverging: bool = False) -> None:
+    """A heat map of ``table`` (R, C) with every cell annotated; ``diverging`` centres the colours on 0."""
+    fig, ax = plt.subplots(figsize=(1.0 + 0.75 * len(cols), 1.2 + 0.42 * len(rows)))
+    finite = table[np.isfinite(table)]
+    if diverging:
+        span = float(np.abs(finite).max()) if finite.size else 1.0
+        image = ax.imshow(table, cmap="RdBu", vmin=-span, vmax=span, aspect="auto", origin="lower")
+    else:
+        image = ax.imshow(table, cmap="gray", aspect="auto", origin="lower")   # darker: lower, as the thesis's maps
+    for (r, c), v in np.ndenumerate(table):
+        if np.isfinite(v):
+            low = (v - finite.min()) / max(np.ptp(finite), 1e-9) if not diverging else 0.5 + v / (2 * span or 1)
+            colour = "white" if (not diverging and low < 0.5) or (diverging and abs(low - 0.5) > 0.3) else "black"
+            ax.text(c, r, f"{v:.0f}" if abs(v) >= 0.5 else "0", ha="center", va="center", fontsize=7, color=colour)
+    ax.set_xticks(range(len(cols)), [str(c) for c in cols])
+    ax.set_yticks(range(len(rows)), [str(r) for r in rows])
+    ax.set_xlabel(col_label)
+    ax.set_ylabel(row_label)
+    ax.set_title("\n".join(textwrap.fill(line, 60) for line in title.split("\n")), fontsize=9)
+    fig.colorbar(image, ax=ax, label="%" if not diverging else "percentage points")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -11,11 +11,12 @@ consensus.
   into account any replaced bids") or ``literal`` ((5.5) as printed, without subtracting the displaced bid). Bid
   values and validity are unchanged.
 * ``task_quitting`` (thesis §5.2.2, Alg 9, eq. (5.6); article eq. (10)): before bidding, quit a multi-agent task
-  whose group is still incomplete once the group-synchronised timer passed δ = ``quit_threshold`` rounds, once per
-  task. The
-  environment keeps the timer and allows the quit only when Alg 9's conditions hold, so the policy needs an
-  environment with ``task_quitting=True, delta=quit_threshold`` (``env_overrides``). Quits go in task-id order,
-  one per step, as Alg 9 loops over tasks.
+  whose group is still incomplete once the group-synchronised timer passed δ rounds, once per task. The environment
+  keeps the timer and allows the quit only when Alg 9's conditions hold (δ is the config field ``delta``), so the
+  policy needs an environment with ``task_quitting=True`` (``env_overrides``) and takes δ from it: a config or an
+  experiment sweep that sets ``delta`` sets the policy's threshold too. ``quit_threshold=k`` pins δ = k instead
+  (``env_overrides`` then also holds ``delta=k``). Quits go in task-id order, one per step, as Alg 9 loops over
+  tasks.
 """
 
 from __future__ import annotations
@@ -33,13 +34,15 @@ TEAM_VALUES = ("net", "literal")
 class CBGAPolicy(Policy):
     """CBGA (Hunt 2014), with team-improving bids and task quitting as options; both on = CBGABI."""
 
-    def __init__(self, team_bidding: bool = False, task_quitting: bool = False, quit_threshold: int = 1,
+    def __init__(self, team_bidding: bool = False, task_quitting: bool = False, quit_threshold: int | None = None,
                  team_value: str = "net") -> None:
         super().__init__()
         if team_value not in TEAM_VALUES:
             raise ValueError(f"team_value {team_value!r} is not one of {TEAM_VALUES}")
-        if isinstance(quit_threshold, bool) or not isinstance(quit_threshold, int) or quit_threshold < 0:
-            raise ValueError(f"quit_threshold must be an integer >= 0, got {quit_threshold!r}")
+        if quit_threshold is not None and (isinstance(quit_threshold, bool) or not isinstance(quit_threshold, int)
+                                           or quit_threshold < 0):
+            raise ValueError(f"quit_threshold must be None (the environment's delta) or an integer >= 0, "
+                             f"got {quit_threshold!r}")
         self.team_bidding = team_bidding
         self.task_quitting = task_quitting
         self.quit_threshold = quit_threshold
@@ -49,9 +52,20 @@ class CBGAPolicy(Policy):
 
     @property
     def env_overrides(self) -> dict[str, Any]:
-        if self.task_quitting:
-            return {"task_quitting": True, "delta": self.quit_threshold}
-        return {}
+        if not self.task_quitting:
+            return {}
+        if self.quit_threshold is None:         # δ is the environment's ``delta``
+            return {"task_quitting": True}
+        return {"task_quitting": True, "delta": self.quit_threshold}
+
+    @property
+    def delta(self) -> int | None:
+        """The δ this policy quits with: its pinned ``quit_threshold``, else the bound environment's ``delta``."""
+        if not self.task_quitting:
+            return None
+        if self.quit_threshold is not None:
+            return self.quit_threshold
+        return self._env.config.delta if self._env is not None else None
 
     def act(self, observations: Mapping[str, Mapping[str, np.ndarray]],
             infos: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, int]:

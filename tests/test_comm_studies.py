@@ -19,7 +19,9 @@ def test_policy_names_carry_the_quit_threshold():
     policy = make_policy("cbga+tq:delta=3")
     assert policy.name == "CBGA+TQ" and policy.env_overrides == {"task_quitting": True, "delta": 3}
     assert make_policy("CBGABI:delta=0").env_overrides == {"task_quitting": True, "delta": 0}
-    assert make_policy("cbga+tq").env_overrides["delta"] == 1                 # the default stays
+    plain = make_policy("cbga+tq")                  # no δ in the name: δ is the config's (default 1), not pinned
+    assert plain.quit_threshold is None and plain.env_overrides == {"task_quitting": True}
+    assert resolve_config("default").delta == 1
     for bad in ("cbga:delta=2", "cbga+tq:delta=x", "cbga+tq:gamma=1", "cbga+tq:delta"):
         with pytest.raises(ValueError):
             make_policy(bad)

@@ -172,3 +172,90 @@ def test_checks_test_the_claim_on_paired_cells():
     assert verdict("ratio_above", ratio=1.5) == "no"
     check = experiments.Check("c", "A", "B", "greater", at=({"n_agents": 5},))
     assert experiments.evaluate_check(check, cells, points)[1] == "n/a"
+
+
+# -- δ reaches the quitting policies; grid sweeps and heat maps ------------------------------------------------------
+def test_a_delta_sweep_reaches_the_quitting_policy():
+    from evaluation import episodes
+    from policies import CBGAPolicy
+
+    assert CBGAPolicy(task_quitting=True).env_overrides == {"task_quitting": True}    # δ from the environment
+    rounds = {}
+    for delta in (0, 8):
+        cfg = resolve_config("default", delta=delta)
+        env = episodes._env("cbga+tq", cfg)
+        assert env.config.delta == delta and env.config.task_quitting
+        rounds[delta] = [run_episode(Episode("cbga+tq", cfg, seed))["rounds"] for seed in range(3)]
+        policy = episodes.policy_for("cbga+tq")
+        assert policy.delta == delta                        # the policy quits with the environment's δ
+    assert sum(rounds[8]) > sum(rounds[0])                   # a longer wait before quitting: more rounds
+
+
+def test_a_pinned_policy_may_not_overrule_a_swept_option(monkeypatch):
+    from evaluation import episodes
+    from policies import CBGAPolicy
+
+    monkeypatch.setattr(episodes, "policy_for", lambda solver: CBGAPolicy(task_quitting=True, quit_threshold=2))
+    assert episodes.policy_overrides("pinned", resolve_config("default")) == {"task_quitting": True, "delta": 2}
+    with pytest.raises(ValueError, match="delta=3"):
+        episodes.policy_overrides("pinned", resolve_config("default", delta=3))
+
+
+def test_grid_sweep_heatmaps_and_comm_columns(tmp_path):
+    path = _write(tmp_path, """
+name: duo_grid
+scenario: default
+sweep: {grid: {n_agents: [2, 3], n_tasks: [3, 4]}, label: "N_n × N_m"}
+series:
+  - {solver: cbba, label: CBBA, overrides: {agents_per_task: 1}}
+  - {solver: cbba-duo, label: duo, overrides: {agents_per_task: 1}}
+  - {solver: cbga, label: CBGA, overrides: {agents_per_task: 2, reward: 150, reward_split: total}}
+baseline: CBBA
+metrics: [score, comm_steps, comm_steps_to_agreement]
+episodes: 2
+headline: ["3 × 4"]
+heatmap: {baseline: CBBA, series: [duo, CBGA], difference: [CBGA, duo]}
+""")
+    exp = experiments.load_experiment(path)
+    assert [p.label for p in exp.points] == ["2 × 3", "2 × 4", "3 × 3", "3 × 4"]
+    assert exp.points[1].overrides == {"n_agents": 2, "n_tasks": 4}
+    docs = tmp_path / "results.md"
+    target = experiments.run_experiment(exp, tmp_path / "out", jobs=1, progress=False, docs=docs)
+    for name in ("heatmap_duo_over_CBBA.png", "heatmap_CBGA_over_CBBA.png", "heatmap_CBGA_minus_duo.png"):
+        assert (target / name).stat().st_size > 0
+    rows, cols, maps = experiments.heatmap_maps(exp, experiments.cells_of(_rows(target / "episodes.csv")),
+                                                exp.points)
+    assert (rows, cols) == ([2, 3], [3, 4])
+    np.testing.assert_allclose(maps["CBGA minus duo"], maps["CBGA over CBBA"] - maps["duo over CBBA"])
+    block = docs.read_text()
+    assert "duo over CBBA" in block and "comm steps (end) | comm steps (agreement)" in block
+    assert "**Ours, score** (mean ± sd)" not in block          # the maps replace the per-point tables in the docs
+    with pytest.raises(ValueError, match="grid of two fields"):
+        experiments.load_experiment(_write(tmp_path, "name: x\nseries: [cbba]\nheatmap: {baseline: CBBA, series: []}"))
+
+
+def test_a_heatmap_grid_takes_a_reference_point_but_no_marks(tmp_path):
+    """The runner's two sets of keys together: heat maps over a grid, paired against one of its cells."""
+    text = """
+name: grid_reference
+scenario: default
+overrides: {agents_per_task: 2}
+sweep: {grid: {n_agents: [3, 4], n_tasks: [3, 4]}}
+series: [cbga, cbgabi]
+baseline: CBGA
+metrics: [score, comm_steps]
+episodes: 2
+heatmap: {baseline: CBGA, series: [CBGABI]}
+reference: {point: "3 × 3", metrics: [score]}
+"""
+    exp = experiments.load_experiment(_write(tmp_path, text))
+    assert exp.heatmap is not None and exp.reference.point.label == "3 × 3" and not exp.marks
+    docs = tmp_path / "results.md"
+    target = experiments.run_experiment(exp, tmp_path / "out", jobs=1, progress=False, docs=docs)
+    assert (target / "heatmap_CBGABI_over_CBGA.png").stat().st_size > 0
+    assert (target / "delta_score.png").stat().st_size > 0
+    block = docs.read_text()
+    assert "CBGABI over CBGA" in block and "paired against n_agents × n_tasks = 3 × 3" in block
+    assert "Paired against n_agents × n_tasks = 3 × 3 (score" in (target / "table.md").read_text()
+    with pytest.raises(ValueError, match="marks"):
+        experiments.load_experiment(_write(tmp_path, text + "marks: [{metric: connected}]\n"))

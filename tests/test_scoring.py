@@ -16,7 +16,7 @@ from helpers import agent, build, reference_gain, reference_team_score, replay, 
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from taskalloc_env import generate, resolve_config
+from taskalloc_env import TaskAllocEnv, generate, resolve_config
 from taskalloc_env.scoring import ScoringModel, team_score
 
 LAM, GAMMA = 0.1, 0.5
@@ -161,6 +161,24 @@ def test_leg_cost_is_not_dmg_counterexample():
     assert leg.insertion_gains(0, [0])[0][1] == pytest.approx(95.0)     # rose: not DMG
     fs = model(s, distance_cost="from_start")
     assert fs.insertion_gains(0, [0])[0][1] == pytest.approx(fs.insertion_gains(0, [])[0][1]) == pytest.approx(90.0)
+
+
+def test_rescore_is_not_dmg_counterexample():
+    """Re-timed gains (``rescore``, (3.11)) are not DMG either, even with the start-distance cost. On the path (0),
+    task 1 fits only before 0 and would push 0 from its window start (4.21) to 9.77, so c_1 = 0.65. Inserting task 2
+    first makes 0 late already (17.05) and leaves a wait before 2's window (8.92) that absorbs task 1's detour:
+    c_1 rises to 99.48. ``frozen`` forbids the insertion that moved 0 (docs/configuration.md, "Which scores are
+    DMG")."""
+    env = TaskAllocEnv(n_agents=1, n_tasks=3, agents_per_task=1, start_time_range=(0.0, 10.0), window=20.0,
+                       distance_cost="from_start")
+    env.reset(seed=1052)
+    s, cfg = env.scenario, env.config
+    rescore = ScoringModel.from_config(s, cfg)
+    assert rescore.insertion_gains(0, [0])[0][1] == pytest.approx(0.65, abs=0.01)
+    assert rescore.insertion_gains(0, [2, 0])[0][1] == pytest.approx(99.48, abs=0.01)       # rose: not DMG
+    frozen = ScoringModel.from_config(s, cfg.replace(marginal_gain="frozen"))
+    assert frozen.insertion_gains(0, [0])[1][2] == 1           # frozen: 2 may not go before 0, which it would delay
+    assert frozen.insertion_gains(0, [2, 0])[0][1] <= frozen.insertion_gains(0, [2])[0][1] + 1e-9   # [2] ⊕ 0: DMG
 
 
 @st.composite
