@@ -31,7 +31,9 @@ from taskalloc_env.scenario import Scenario
 
 @dataclasses.dataclass(frozen=True)
 class BidView:
-    """Per (agent, task) arrays, all (N, M)."""
+    """Per (agent, task) arrays, all (N, M), describing the agents' tables as they are when the view is taken and
+    until the protocol next changes them (``Protocol.view`` updates the arrays in place; copy what must outlive
+    that)."""
 
     gain: np.ndarray            # c_ij (3.11), the agent's own value of the task
     bid: np.ndarray             # what a bid stores and shares: c_ij, or min(c_ij, earlier bundle bids) warped
@@ -168,7 +170,11 @@ def refresh_rows(previous: BidView | None, rows: Sequence[int], knowledge: Local
                  prereq_mode: str, require_known_capacity: bool, max_bundle: int, fillable: np.ndarray,
                  bid_warping: bool = False, outbid_ties: str = "strict") -> BidView:
     """``bid_view`` with only ``rows`` recomputed from ``previous`` (all rows without one): compiled
-    (``kernels.bids.bid_rows``) when numba is there, else ``bid_view`` in full. ``previous`` is left unchanged."""
+    (``kernels.bids.bid_rows``) when numba is there, else ``bid_view`` in full.
+
+    The rows are rewritten in ``previous``'s arrays (a view describes the tables until they next change; copying
+    (N, M) arrays at every bid cost more than the bids at 100 agents); the view returned is a new object over them.
+    """
     if not kernels.COMPILED:
         return bid_view(knowledge, scenario, equipment, equipment_match, gain, slot, prereq_mode=prereq_mode,
                         require_known_capacity=require_known_capacity, max_bundle=max_bundle, fillable=fillable,
@@ -180,7 +186,7 @@ def refresh_rows(previous: BidView | None, rows: Sequence[int], knowledge: Local
                                  bool if name in ("outbid", "eligible", "prereqs_met", "in_bundle") else float)
                   for name in ROW_FIELDS}
     else:
-        arrays = {name: getattr(previous, name).copy() for name in ROW_FIELDS}
+        arrays = {name: getattr(previous, name) for name in ROW_FIELDS}
     capacity = (known_capacity(knowledge, scenario, equipment, equipment_match) if require_known_capacity
                 else np.ones((n, m), dtype=bool))
     bid_rows(np.asarray(rows, dtype=np.int64), knowledge.bids, knowledge.winner, knowledge.single, gain,

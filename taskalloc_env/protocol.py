@@ -156,7 +156,7 @@ class Protocol:
         if self._view is None or self._stale_rows:
             self._refresh_paths()
             self._view = refresh_rows(self._view, sorted(self._stale_rows), self.knowledge, self.scenario,
-                                      self.equipment, self.equipment_match, self._gain.copy(), self._slot.copy(),
+                                      self.equipment, self.equipment_match, self._gain, self._slot,
                                       prereq_mode=self.cfg.prereq_mode,
                                       require_known_capacity=self.cfg.require_known_capacity,
                                       max_bundle=self.max_bundle, fillable=self.fillable,

@@ -13,23 +13,28 @@ from __future__ import annotations
 import numpy as np
 
 from taskalloc_env.kernels import jit
-from taskalloc_env.kernels.merge import NONE, _outbids, _replaceable, _slot_open
+from taskalloc_env.kernels.merge import NONE, _outbids, _replaceable
 
 ALL_HAVE_BID, ALL_COMPLETE, ANY_HAS_BID = 0, 1, 2
 PREREQ_MODES = {"all_have_bid": ALL_HAVE_BID, "all_complete": ALL_COMPLETE, "any_has_bid": ANY_HAS_BID}
 
 
 @jit
-def _covers(column: np.ndarray, required: np.ndarray, agent_eq: np.ndarray) -> bool:
-    """``Equipment.covers`` for one column: the members' items include te_j as a multiset, (3.5)."""
-    for e in range(required.size):
-        have = 0
-        for k in range(column.size):
-            if column[k] > 0 and agent_eq[k, e]:
-                have += 1
-        if have < required[e]:
+def _covered(have: np.ndarray, required: np.ndarray) -> bool:
+    """``Equipment.covers`` from the items the members carry: they include te_j as a multiset, (3.5)."""
+    for e in range(required.size):  # noqa: SIM110 - compiled: an explicit loop, not a generator
+        if have[e] < required[e]:
             return False
     return True
+
+
+@jit
+def _fills(have: np.ndarray, newcomer: int, required: np.ndarray, agent_eq: np.ndarray) -> bool:
+    """``Equipment.slot_open`` from the items the members carry: the newcomer meets an unmet item of te_j."""
+    for e in range(required.size):  # noqa: SIM110 - compiled: an explicit loop, not a generator
+        if agent_eq[newcomer, e] and required[e] > have[e]:
+            return True
+    return False
 
 
 @jit
@@ -42,13 +47,40 @@ def bid_rows(rows: np.ndarray, bids: np.ndarray, winner: np.ndarray, single: np.
              displaced_bid: np.ndarray, in_bundle: np.ndarray) -> None:
     """Fill rows ``rows`` of the (N, M) view arrays in place (see ``bidding.BidView`` for their meaning)."""
     n, _, m = bids.shape
+    n_items = required.shape[1]
     any_prereqs = prereqs.any()
+    total = np.zeros(m)
+    lowest = np.zeros(m)
+    victim = np.zeros(m, dtype=np.int64)
+    have = np.zeros((m, n_items), dtype=np.int64)                # items the members carry, per column
     for i in rows:
         lowest_own = np.inf
         for j in range(m):
             in_bundle[i, j] = bids[i, i, j] > 0
             if in_bundle[i, j] and bids[i, i, j] < lowest_own:
                 lowest_own = bids[i, i, j]
+        # one pass over i's table in memory order: member count, total, lowest bid and lowest replaceable member
+        members[i, :] = 0
+        total[:] = 0.0
+        lowest[:] = np.inf
+        victim[:] = -1
+        have[:, :] = 0
+        for k in range(n):
+            for j in range(m):
+                value = bids[i, k, j]
+                if not value > 0:
+                    continue
+                for e in range(n_items):
+                    if agent_eq[k, e]:
+                        have[j, e] += 1
+                if single[j]:
+                    continue
+                members[i, j] += 1
+                total[j] += value
+                lowest[j] = min(lowest[j], value)
+                if (not restricted[j] or _replaceable(k, i, required[j], agent_eq)) \
+                        and (victim[j] < 0 or value < bids[i, victim[j], j]):
+                    victim[j] = k
         for j in range(m):
             b = min(gain[i, j], lowest_own) if warping else gain[i, j]
             bid[i, j] = b
@@ -63,29 +95,17 @@ def bid_rows(rows: np.ndarray, bids: np.ndarray, winner: np.ndarray, single: np.
                 displaced[i, j] = w
                 displaced_bid[i, j] = held
                 continue
-            column = bids[i, :, j]
-            count = 0
-            total = 0.0
-            lowest = np.inf
-            victim = -1
-            for k in range(n):
-                if column[k] > 0:
-                    count += 1
-                    total += column[k]
-                    lowest = min(lowest, column[k])
-                    if (not restricted[j] or _replaceable(k, i, required[j], agent_eq)) \
-                            and (victim < 0 or column[k] < column[victim]):
-                        victim = k
-            members[i, j] = count
-            group_total[i, j] = total
-            lowest_bid[i, j] = lowest if count > 0 else 0.0
-            room = count < need[j] and (not restricted[j] or _slot_open(column, i, required[j], agent_eq))
+            count = members[i, j]
+            group_total[i, j] = total[j]
+            lowest_bid[i, j] = lowest[j] if count > 0 else 0.0
+            room = count < need[j] and (not restricted[j] or _fills(have[j], i, required[j], agent_eq))
+            v = victim[j]
             beats = False
-            if not room and victim >= 0:
-                beats = b > column[victim] if strict else _outbids(b, i, column[victim], victim)
+            if not room and v >= 0:
+                beats = b > bids[i, v, j] if strict else _outbids(b, i, bids[i, v, j], v)
             outbid[i, j] = room or beats
-            displaced[i, j] = victim if beats else NONE
-            displaced_bid[i, j] = column[victim] if beats else 0.0
+            displaced[i, j] = v if beats else NONE
+            displaced_bid[i, j] = bids[i, v, j] if beats else 0.0
         for j in range(m):                                   # prerequisites ((3.6), article eq. (5))
             met = True
             if any_prereqs:
@@ -102,7 +122,7 @@ def bid_rows(rows: np.ndarray, bids: np.ndarray, winner: np.ndarray, single: np.
                             if prereq_mode == ALL_HAVE_BID:
                                 done = members[i, p] > 0
                             else:
-                                done = members[i, p] == need[p] and _covers(bids[i, :, p], required[p], agent_eq)
+                                done = members[i, p] == need[p] and _covered(have[p], required[p])
                             if not done:
                                 met = False
                                 break

@@ -54,20 +54,6 @@ def _decide(i: int, k: int, z_i: int, y_i: float, z_k: int, y_k: float, s_i: np.
 
 
 @jit
-def _slot_open(column: np.ndarray, newcomer: int, required: np.ndarray, agent_eq: np.ndarray) -> bool:
-    """``Equipment.slot_open`` for one column: the newcomer fills an item the members leave unmet."""
-    for e in range(required.size):
-        if required[e] > 0 and agent_eq[newcomer, e]:
-            have = 0
-            for m in range(column.size):
-                if column[m] > 0 and agent_eq[m, e]:
-                    have += 1
-            if required[e] > have:
-                return True
-    return False
-
-
-@jit
 def _replaceable(m: int, newcomer: int, required: np.ndarray, agent_eq: np.ndarray) -> bool:
     for e in range(required.size):  # noqa: SIM110 - compiled: an explicit loop, not a generator
         if required[e] > 0 and agent_eq[m, e] and agent_eq[newcomer, e]:
@@ -132,6 +118,16 @@ def _list_slot_open(count: int, ids: np.ndarray, newcomer: int, required: np.nda
                     have += 1
             if required[e] > have:
                 return True
+    return False
+
+
+@jit
+def _any_trusted(count: int, ids: np.ndarray, i: int, k: int, s_i: np.ndarray, s_k: np.ndarray) -> bool:
+    """Some member other than the receiver i is the sender k or was heard of more recently by k than by i."""
+    for c in range(count):
+        m = ids[c]
+        if m != i and (m == k or s_k[m] > s_i[m]):
+            return True
     return False
 
 
@@ -315,6 +311,8 @@ def exchange_all(bids: np.ndarray, winner: np.ndarray, stamps: np.ndarray, known
             if content[i, j] >= 0 and content[i, j] == sent_content[t, j]:
                 continue                    # an identical column: neither pass changes anything
             c_i, c_k = count[i, j], sent_count[t, j]
+            if not (_any_trusted(c_i, ids[i, j], i, k, s_i, s_k) or _any_trusted(c_k, sent_ids[t, j], i, k, s_i, s_k)):
+                continue                    # both passes act on trusted members only: nothing can change
             for c in range(c_i):
                 before_ids[c], before_values[c] = ids[i, j, c], values[i, j, c]
             c_new = _merge_members(c_i, ids[i, j], values[i, j], c_k, sent_ids[t, j], sent_values[t, j], i, k,
