@@ -38,6 +38,8 @@ from policies import exact, make_policy, rollout, sgama
 from policies.base import Policy
 from policies.centralised import MAX_AGENTS, MAX_TASKS
 from policies.duo import preferred_duo_cbba
+from policies.fast import solve as fast_solve
+from policies.scripted import CBGAPolicy
 from taskalloc_env import Scenario, TaskAllocConfig, TaskAllocEnv
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import max_required_agents
@@ -140,6 +142,14 @@ def solve(solver: str | Policy, env: TaskAllocEnv, seed: int) -> Allocation:
         env.reset(seed=seed)
         return table[solver.lower()][1](env.unwrapped.scenario, env.config)
     policy = policy_for(solver) if isinstance(solver, str) else solver
+    unwrapped = env.unwrapped
+    if isinstance(policy, CBGAPolicy) and not unwrapped.config.faulty:
+        # the scripted consensus policies through the protocol directly: the same allocation and counters as the
+        # rollout (tests/test_fast.py), without the env's observations, rewards and infos
+        env.reset(seed=seed)
+        policy.start(env, seed=seed)                # the same binding and environment checks as the rollout
+        return fast_solve(unwrapped.scenario, unwrapped.config, policy, dtype=unwrapped.dtype,
+                          max_cycles=unwrapped.max_cycles)
     return rollout(env, policy, seed=seed)
 
 
