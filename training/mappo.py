@@ -369,7 +369,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     rng = np.random.default_rng(cfg.seed)
     summary: dict[str, Any] = {"command": " ".join(["python -m training.mappo", *(argv or sys.argv[1:])]),
                                "cpu_count": os.cpu_count(), "load_average_at_start": round(os.getloadavg()[0], 2)}
-    t_start = time.perf_counter()
+    t_start, cpu_start = time.perf_counter(), time.process_time()
 
     # -- environments: one group of copies per mixture entry ----------------------------------------------------------
     groups, first = [], cfg.seed * 1000
@@ -433,6 +433,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
                    agent_steps_per_second=round(steps / seconds, 1) if seconds else None,
                    env_steps_per_second=round(env_steps / seconds, 1) if seconds else None,
                    validation_ratio=ratios,
+                   cpu_seconds=round(time.process_time() - cpu_start, 1),
                    load_average_at_end=round(os.getloadavg()[0], 2),
                    wall_seconds=round(time.perf_counter() - t_start, 1))
     (out_dir / "summary.yaml").write_text(yaml.safe_dump(plain(summary), sort_keys=False))

@@ -183,7 +183,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     th.set_num_threads(cfg.torch_threads)
     set_random_seed(cfg.seed)
     summary: dict[str, Any] = {"command": " ".join(["python -m training.train", *(argv or sys.argv[1:])])}
-    t_start = time.perf_counter()
+    t_start, cpu_start = time.perf_counter(), time.process_time()
 
     # -- environments: every learned agent of every copy is one slot ------------------------------------------------
     venv = TaskAllocVecEnv(make_env_fns(cfg.n_envs, **cfg.env_kwargs()), scripted_agents=cfg.scripted_agents,
@@ -239,6 +239,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     venv.close()
     summary["validation"] = validation_score(model, cfg)
     summary["wall_seconds"] = round(time.perf_counter() - t_start, 1)
+    summary["cpu_seconds"] = round(time.process_time() - cpu_start, 1)
     (out_dir / "summary.yaml").write_text(yaml.safe_dump(plain(summary), sort_keys=False))
     print(yaml.safe_dump(plain(summary), sort_keys=False), flush=True)
     return summary
