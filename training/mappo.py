@@ -23,8 +23,9 @@ so returns have the same order of magnitude on every size. An episode cut by ``m
 the critic's value of its last state (a time limit is not a terminal state, Pardo et al. 2018).
 
 The run writes to ``out_dir``: ``config.yaml``, ``model.json`` + ``model.safetensors`` (the actor, in the project's
-checkpoint format, loadable as ``learned:<out_dir>``), ``eval.csv`` (the greedy policy on the validation seeds of
-every entry, next to CBGABI), ``train.csv`` (losses and statistics per update) and ``summary.yaml``.
+checkpoint format, loadable as ``learned:<out_dir>``), ``critic.safetensors`` (for a run that continues this one,
+``init_from``), ``eval.csv`` (the greedy policy on the validation seeds of every entry, next to CBGABI), ``train.csv``
+(losses and statistics per update) and ``summary.yaml``.
 """
 
 from __future__ import annotations
@@ -41,12 +42,13 @@ from typing import Any
 import numpy as np
 import torch as th
 import yaml
+from safetensors.torch import load_file, save_file
 from torch import nn
 
 from evaluation.episodes import evaluate, summarise
 from evaluation.seeds import TEST_SEEDS, VALIDATION_SEED_START
 from policies import checkpoint, make_policy
-from policies.learned import LearnedPolicy
+from policies.learned import LearnedPolicy, resolve
 from policies.networks import AttentionActor, PoolingActor, count_parameters
 from taskalloc_env.config import PROTOCOL_FIELDS, resolve_config
 from taskalloc_env.env import TaskAllocEnv
@@ -55,6 +57,7 @@ from training.config import check_at_least, check_types, opt, parse, plain, prep
 from training.critic import StateCritic
 
 ACTORS = ("attention", "pooling")
+CRITIC_FILE = "critic.safetensors"      # next to model.json: the critic, for a run that continues this one
 ENTRY_KEYS = {"scenario", "overrides", "copies", "from_steps", "label"}
 EVAL_COLUMNS = ("steps", "wall_time", "entry", "score", "baseline_score", "ratio", "valid_tasks", "rounds",
                 "messages")
@@ -86,6 +89,8 @@ class MappoConfig:
     hidden: int = opt(64, "width of the actor and the critic")
     heads: int = opt(4, "attention heads (attention actor and critic)")
     layers: int = opt(2, "self-attention layers of the attention actor")
+    init_from: str | None = opt(None, "start from a run's actor and critic (a run folder with model.json and "
+                                      "critic.safetensors; a committed model's name or a checkpoint: the actor only)")
     # PPO
     total_steps: int = opt(1_000_000, "agent steps (one agent's decision in one env step) to train for")
     n_steps: int = opt(64, "steps per env copy in one rollout")
@@ -350,6 +355,22 @@ class Evaluator:
         return ratios
 
 
+def load_weights(model: ActorCritic, source: str) -> list[str]:
+    """Start from a checkpoint's actor weights and, when its folder holds one, its critic (``init_from``)."""
+    json_path = Path(str(resolve(source)))
+    json_path = json_path / "model.json" if json_path.is_dir() else json_path.with_suffix(".json")
+    states = [("actor", model.actor, checkpoint.load(json_path).actor.state_dict())]
+    if (json_path.parent / CRITIC_FILE).is_file():
+        states.append(("critic", model.critic, load_file(str(json_path.parent / CRITIC_FILE))))
+    for name, module, state in states:
+        try:
+            module.load_state_dict(state, strict=True)
+        except RuntimeError as exc:
+            raise ConfigError(f"init_from {source}: its {name} does not fit this run's networks (actor, hidden, "
+                              f"heads, layers): {str(exc).splitlines()[0]}") from None
+    return [name for name, _, _ in states]
+
+
 def as_learned(actor: nn.Module, group: Group, cfg: MappoConfig) -> LearnedPolicy:
     return LearnedPolicy(actor, group.layout.own_names, group.layout.task_names, cfg.env_overrides, name=cfg.name)
 
@@ -387,6 +408,8 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     # -- networks --------------------------------------------------------------------------------------------------
     actor = make_actor(cfg, layout.own_size, layout.task_size)
     model = ActorCritic(actor, StateCritic(layout.n_equipment, cfg.hidden, cfg.heads))
+    if cfg.init_from:
+        summary["init_from"] = load_weights(model, cfg.init_from)
     optimizer = th.optim.Adam(model.parameters(), lr=cfg.learning_rate, eps=1e-5)
     summary["parameters"] = {"actor": count_parameters(model.actor), "critic": count_parameters(model.critic)}
     evaluator = Evaluator(groups, cfg, out_dir / "eval.csv")
@@ -428,7 +451,8 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     ratios = evaluator(model, steps, seconds)
     save_actor(out_dir / "model", model.actor, groups[0], cfg,
                {"name": cfg.name, "algo": "mappo", "seed": cfg.seed, "steps": steps,
-                "mixture": [g.label for g in groups]})
+                "mixture": [g.label for g in groups], "init_from": cfg.init_from})
+    save_file({k: v.contiguous() for k, v in model.critic.state_dict().items()}, str(out_dir / CRITIC_FILE))
     summary.update(steps=steps, env_steps=env_steps, updates=update_i, train_seconds=round(seconds, 1),
                    agent_steps_per_second=round(steps / seconds, 1) if seconds else None,
                    env_steps_per_second=round(env_steps / seconds, 1) if seconds else None,
