@@ -1,71 +1,105 @@
-"""Training throughput: environment steps per second while MaskablePPO trains (rollouts and updates together).
+"""Training throughput per algorithm: agent steps per second while PPO trains (rollouts and updates together).
 
-    python -m benchmarks.bench_train                          # 40 960 steps, 8 copies, in-process and 2 subprocesses
-    python -m benchmarks.bench_train --steps 20480 --n-procs 0
+    python -m benchmarks.bench_train                              # SB3 MaskablePPO and our MAPPO loop
+    python -m benchmarks.bench_train --algos sb3 mappo rllib      # RLlib too (pip install taskalloc[ray])
+    python -m benchmarks.bench_train --algos sb3 --n-procs 0 2    # SB3 with its copies in 0 and 2 subprocesses
 
-Two figures per setting: *agent steps/s* (vector-env transitions: one per learned agent per step, what SB3 counts as
-timesteps) and *env steps/s* (parallel-env steps, all agents at once = agent steps / agents per copy), for the whole
-``learn()`` call (collection + PPO updates) and for collection alone (the same policy acting, no updates). The load
-average is printed because the machine is shared.
+Every algorithm trains on ``train_small`` (4 agents) for about ``--steps`` agent steps from a fresh network, one
+torch thread:
+
+* ``sb3``: ``training.train`` with ``configs/training/train_small.yaml`` (MaskablePPO, pooling actor and a critic
+  on the local observation, 8 copies = 32 slots, 10 epochs);
+* ``mappo``: ``training.mappo`` with ``configs/training/mappo_small.yaml`` (attention actor, critic on
+  ``env.state()``, 16 copies, 8 epochs), and with ``mappo_small_pooling.yaml`` (pooling actor);
+* ``rllib``: ``training.rllib_ppo`` (RLlib PPO, new API stack, attention actor, sampling in the driver process
+  with 4 env copies, 4 epochs), including its own framework overhead but not Ray's start.
+
+An *agent step* is one decision of one agent in one env step (what SB3 and RLlib count as agent timesteps); *env
+steps* = agent steps / 4. The figures cover the whole training call (collection and updates). The load average is
+printed before and after because the machine may be shared: the figures are only comparable within one run.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import tempfile
 import time
+from collections.abc import Callable, Sequence
 
 import torch as th
-from sb3_contrib import MaskablePPO
 
-from taskalloc_env.errors import run_cli
-from training.train import build_model, load_config
-from training.vec_env import TaskAllocVecEnv, make_env_fns
+from taskalloc_env.errors import ConfigError, run_cli
+
+ALGOS = ("sb3", "mappo", "rllib")
+AGENTS = 4      # train_small
 
 
-def collection_rate(model: MaskablePPO, venv: TaskAllocVecEnv, steps: int) -> float:
-    """Agent steps per second of acting only (masked policy forward + env step)."""
-    obs = venv.reset()
-    n = max(1, steps // venv.num_envs)
+def bench_sb3(steps: int, n_procs: int, out_dir: str) -> dict[str, float]:
+    from training.train import build_model, load_config
+    from training.vec_env import TaskAllocVecEnv, make_env_fns
+
+    cfg = load_config(["--config", "train_small", "--n-procs", str(n_procs), "--tensorboard", "false",
+                       "--progress-bar", "false", "--out-dir", out_dir])
+    th.set_num_threads(cfg.torch_threads)
+    venv = TaskAllocVecEnv(make_env_fns(cfg.n_envs, **cfg.env_kwargs()), n_procs=n_procs)
+    model = build_model(cfg, venv)
     t0 = time.perf_counter()
-    for _ in range(n):
-        kwargs = {"action_masks": venv.action_masks()} if isinstance(model, MaskablePPO) else {}
-        actions, _ = model.predict(obs, **kwargs)
-        obs, _, _, _ = venv.step(actions)
-    return n * venv.num_envs / (time.perf_counter() - t0)
+    model.learn(steps)
+    seconds = time.perf_counter() - t0
+    venv.close()
+    return {"agent_steps": model.num_timesteps, "seconds": seconds}
 
 
-def main(argv: list[str] | None = None) -> list[dict[str, float]]:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--config", default="configs/training/train_small.yaml")
-    parser.add_argument("--steps", type=int, default=40_960)
-    parser.add_argument("--n-envs", type=int, default=None, help="env copies (default: the config's)")
-    parser.add_argument("--n-procs", type=int, nargs="+", default=[0, 2])
+def bench_mappo(steps: int, config: str, out_dir: str) -> dict[str, float]:
+    from training import mappo
+
+    summary = mappo.main(["--config", config, "--total-steps", str(steps), "--eval-freq", "0", "--eval-episodes",
+                          "1", "--out-dir", out_dir])
+    return {"agent_steps": summary["steps"], "seconds": summary["train_seconds"]}
+
+
+def bench_rllib(steps: int, out_dir: str) -> dict[str, float]:
+    from training import rllib_ppo
+
+    batch = 1024                            # env steps per iteration = 4096 agent steps
+    summary = rllib_ppo.main(["train", "--out-dir", out_dir, "--iterations",
+                              str(max(1, steps // (batch * AGENTS))), "--train-batch", str(batch),
+                              "--eval-episodes", "1"])
+    return {"agent_steps": summary["iterations"][-1]["agent_steps"], "seconds": summary["train_seconds"]}
+
+
+def main(argv: Sequence[str] | None = None) -> list[dict[str, float | str]]:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_train", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--algos", nargs="+", choices=ALGOS, default=["sb3", "mappo"],
+                        help="algorithms to measure (default: sb3 mappo; rllib needs pip install taskalloc[ray])")
+    parser.add_argument("--steps", type=int, default=40_960, help="agent steps per measurement (default 40 960)")
+    parser.add_argument("--n-procs", type=int, nargs="+", default=[0],
+                        help="sb3 only: subprocesses for the env copies, one measurement each (default 0)")
     args = parser.parse_args(argv)
+    if args.steps < 4096:
+        raise ConfigError(f"--steps: got {args.steps}; allowed: an integer >= 4096 (one rollout of every algorithm)")
+    cases: list[tuple[str, Callable[[str], dict[str, float]]]] = []
+    for algo in args.algos:
+        if algo == "sb3":
+            cases += [(f"SB3 MaskablePPO, pooling, n_procs {k}", lambda out, k=k: bench_sb3(args.steps, k, out))
+                      for k in args.n_procs]
+        elif algo == "mappo":
+            cases += [("MAPPO (training.mappo), attention", lambda out: bench_mappo(args.steps, "mappo_small", out)),
+                      ("MAPPO (training.mappo), pooling",
+                       lambda out: bench_mappo(args.steps, "mappo_small_pooling", out))]
+        else:
+            cases.append(("RLlib PPO, attention", lambda out: bench_rllib(args.steps, out)))
+    print(f"load average before: {os.getloadavg()[0]:.2f}  (cores: {os.cpu_count()})", flush=True)
     results = []
-    print(f"load average before: {os.getloadavg()[0]:.2f}  (cores: {os.cpu_count()})")
-    print(f"{'n_procs':>7} {'slots':>5} {'learn agent-steps/s':>20} {'learn env-steps/s':>18} "
-          f"{'collect agent-steps/s':>22}")
-    for n_procs in args.n_procs:
-        overrides = ["--n-procs", str(n_procs), "--tensorboard", "false", "--progress-bar", "false",
-                     "--bc-episodes", "0", "--init-from", "null"]
-        if args.n_envs:
-            overrides += ["--n-envs", str(args.n_envs)]
-        cfg = load_config(["--config", args.config, *overrides])
-        th.set_num_threads(cfg.torch_threads)
-        venv = TaskAllocVecEnv(make_env_fns(cfg.n_envs, **cfg.env_kwargs()), scripted_agents=cfg.scripted_agents,
-                               n_procs=n_procs)
-        model = build_model(cfg, venv)
-        t0 = time.perf_counter()
-        model.learn(args.steps)
-        learn_rate = model.num_timesteps / (time.perf_counter() - t0)
-        collect = collection_rate(model, venv, args.steps // 2)
-        venv.close()
-        row = {"n_procs": n_procs, "slots": venv.num_envs, "learn_agent_steps_per_s": learn_rate,
-               "learn_env_steps_per_s": learn_rate / venv.agents_per_copy, "collect_agent_steps_per_s": collect}
-        results.append(row)
-        print(f"{n_procs:>7} {venv.num_envs:>5} {learn_rate:>20.0f} {learn_rate / venv.agents_per_copy:>18.0f} "
-              f"{collect:>22.0f}", flush=True)
+    for label, run in cases:
+        with tempfile.TemporaryDirectory() as out:
+            measured = run(out)
+        rate = measured["agent_steps"] / measured["seconds"]
+        results.append({"algorithm": label, **measured, "agent_steps_per_s": rate})
+        print(f"{label:<40} {measured['agent_steps']:>8} agent steps {measured['seconds']:>8.1f} s "
+              f"{rate:>8.0f} agent steps/s {rate / AGENTS:>7.0f} env steps/s", flush=True)
     print(f"load average after: {os.getloadavg()[0]:.2f}")
     return results
 

@@ -23,6 +23,7 @@ from typing import Any
 
 import yaml
 
+from evaluation.distributed import BACKENDS
 from evaluation.episodes import Episode, default_jobs, policy_for, run_episodes, skip_reason, solver_name
 from evaluation.report import (
     bar_and_differences,
@@ -102,7 +103,7 @@ def summary(rows: Sequence[dict[str, Any]], order: Sequence[str]) -> tuple[str, 
 
 
 def compare(scenario: str, episodes: int, overrides: dict[str, Any], jobs: int = 1, out: Path | None = None,
-            learned: Sequence[str] | None = None, progress: bool = False) -> str:
+            learned: Sequence[str] | None = None, progress: bool = False, backend: str = "local") -> str:
     """Run the comparison; returns the report text (also written to ``out`` when given)."""
     cfg = resolve_config(scenario, **overrides)
     notes, solvers = [], []
@@ -123,7 +124,7 @@ def compare(scenario: str, episodes: int, overrides: dict[str, Any], jobs: int =
             notes.append(why + ".")
     names = {s: display_name(s) for s in solvers}
     runs = [Episode(s, cfg, seed, (("policy", names[s]),)) for s in solvers for seed in range(episodes)]
-    rows = run_episodes(runs, jobs=jobs, progress=progress, desc="compare")
+    rows = run_episodes(runs, jobs=jobs, progress=progress, desc="compare", backend=backend)
     table, records = summary(rows, [names[s] for s in solvers])
     setting = (f"Scenario `{scenario}`{''.join(f', {k}={v}' for k, v in overrides.items())}: {cfg.n_agents} agents, "
                f"{cfg.n_tasks} tasks, L_j = {_agents_text(cfg)}; {episodes} paired seeds (0–{episodes - 1}).")
@@ -167,6 +168,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=None, help="write compare.md/.csv/.png and episodes.csv here")
     parser.add_argument("--jobs", type=int, default=default_jobs(),
                         help=f"worker processes (default: every core, {default_jobs()} here)")
+    parser.add_argument("--backend", choices=BACKENDS, default="local",
+                        help="local: --jobs processes on this machine; ray: Ray tasks on a local Ray instance, or on "
+                             "the cluster RAY_ADDRESS names (pip install taskalloc[ray]); the same table either way")
     parser.add_argument("--learned", action="append", default=None, metavar="NAME_OR_PATH",
                         help="a learned policy to include: a committed model's name or a checkpoint path "
                              "(repeatable; default: every committed model in models/)")
@@ -183,7 +187,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--jobs: got {args.jobs}; allowed: an integer >= 1")
     started = time.perf_counter()
     learned = [] if args.no_learned else args.learned
-    text = compare(args.scenario, args.episodes, dict(args.overrides), args.jobs, args.out, learned, args.progress)
+    text = compare(args.scenario, args.episodes, dict(args.overrides), args.jobs, args.out, learned, args.progress,
+                   args.backend)
     print(text, end="")
     if args.out is not None:
         print(f"written: {args.out}/compare.md, compare.csv, episodes.csv, compare.png")

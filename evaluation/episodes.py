@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from evaluation.distributed import BACKENDS, ray_map
 from policies import exact, make_policy, rollout, sgama
 from policies.base import Policy
 from policies.centralised import MAX_AGENTS, MAX_TASKS
@@ -203,11 +204,14 @@ def default_jobs() -> int:
 
 
 def run_episodes(episodes: Sequence[Episode], jobs: int = 1, progress: bool = True,
-                 desc: str = "episodes") -> list[dict[str, Any]]:
-    """Run every episode (in ``jobs`` processes when > 1); rows come back in the order of ``episodes``."""
+                 desc: str = "episodes", backend: str = "local") -> list[dict[str, Any]]:
+    """Run every episode (in ``jobs`` processes when > 1, or as Ray tasks with ``backend="ray"``, see
+    ``evaluation.distributed``); rows come back in the order of ``episodes``."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend {backend!r} is not one of {BACKENDS}")
     rows = []
     with tqdm(total=len(episodes), desc=desc, disable=not progress, unit="ep", dynamic_ncols=True) as bar:
-        for row in _map(episodes, jobs):
+        for row in (ray_map(run_episode, episodes) if backend == "ray" else _map(episodes, jobs)):
             rows.append(row)
             bar.update()
     return rows

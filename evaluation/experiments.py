@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from evaluation.distributed import BACKENDS
 from evaluation.episodes import Episode, check_pairing, default_jobs, run_episodes, skip_reason, solver_name
 from evaluation.report import (
     METRIC_DIGITS,
@@ -351,13 +352,13 @@ def plan(exp: Experiment, points: Sequence[Point], episodes: int) -> tuple[list[
 
 
 def run_experiment(exp: Experiment, out: Path, jobs: int, episodes: int | None = None, quick: bool = False,
-                   progress: bool = True, docs: Path | None = None) -> Path:
+                   progress: bool = True, docs: Path | None = None, backend: str = "local") -> Path:
     """Run ``exp`` and write every output under ``out / exp.name``; returns that directory."""
     points = exp.quick_points if quick else exp.points
     n = episodes or (exp.quick_episodes if quick else exp.episodes)
     runs, skipped = plan(exp, points, n)
     started, cpu = time.perf_counter(), _cpu_seconds()
-    rows = run_episodes(runs, jobs=jobs, progress=progress, desc=exp.name)
+    rows = run_episodes(runs, jobs=jobs, progress=progress, desc=exp.name, backend=backend)
     wall, cpu = time.perf_counter() - started, _cpu_seconds() - cpu
     broken = check_pairing([r for r in rows if _same_generator(exp, r)], ["point"])
     if broken:
@@ -367,6 +368,7 @@ def run_experiment(exp: Experiment, out: Path, jobs: int, episodes: int | None =
     write_csv(target / "episodes.csv", rows)
     (target / "config.yaml").write_text(yaml.safe_dump(_resolved(exp, points), sort_keys=False, allow_unicode=True))
     info = {"experiment": exp.name, "episodes_per_cell": n, "points": [p.label for p in points], "jobs": jobs,
+            "backend": backend,
             "quick": quick, "wall_seconds": round(wall, 1), "cpu_seconds": round(cpu, 1),
             "episodes_total": len(rows),
             "command": " ".join(["python -m evaluation.experiments", *sys.argv[1:]]) if sys.argv else "",
@@ -762,6 +764,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     run.add_argument("--episodes", type=int, default=None, help="seeds per cell (default: the file's, 100)")
     run.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes (default: all cores)")
     run.add_argument("--quick", action="store_true", help="2 seeds at <= 3 points, into results/tmp/quick")
+    run.add_argument("--backend", choices=BACKENDS, default="local",
+                     help="local: --jobs processes; ray: Ray tasks on a local Ray instance or the cluster RAY_ADDRESS "
+                          "names (pip install taskalloc[ray]); the same tables either way")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
     if args.command == "list":
@@ -780,7 +785,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             report_experiment(exp, out, docs)
             continue
         t0 = time.perf_counter()
-        target = run_experiment(exp, out, args.jobs, args.episodes, quick, not args.no_progress, docs)
+        target = run_experiment(exp, out, args.jobs, args.episodes, quick, not args.no_progress, docs, args.backend)
         print(f"{exp.name}: {time.perf_counter() - t0:.1f} s -> {target.relative_to(out.parent)}/table.md")
     print(f"total {time.perf_counter() - started:.1f} s")
     if docs is not None and args.all:

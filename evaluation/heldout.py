@@ -1,11 +1,12 @@
-"""The table of ``docs/learning.md``: baselines, centralised solvers and learned checkpoints on held-out seeds.
+"""A quick table: baselines, centralised solvers and any learned checkpoints on held-out seeds.
 
-    python -m evaluation.heldout                                   # print the table (seeds 10000..10099)
-    python -m evaluation.heldout --update-doc docs/learning.md     # also rewrite the table in the doc
+    python -m evaluation.heldout                                   # the committed models, seeds 10000..10199
+    python -m evaluation.heldout --scenario default --episodes 20 --learned "mine=runs/x/model.json"
 
 Rows: random, CBGA, CBGABI (scripted, decentralised), SGAMA (centralised greedy), the exact optimum, and every
-``--learned LABEL=PATH`` checkpoint (default: the committed behaviour-cloning, PPO-from-scratch and BC + PPO
-models: ``models/train_small_bc/bc.json``, ``train_small`` and ``train_small_bc``).
+``--learned LABEL=PATH`` checkpoint (default: the committed models ``models/train_small_bc/bc.json``,
+``train_small``, ``train_small_bc``, ``mappo_small`` and ``mappo_mixture``). The tables of ``docs/learning.md``,
+with several training seeds per configuration, come from ``evaluation.learning_report``.
 Each policy runs in an environment built with its ``env_overrides``; seed s is the same instance for
 every row (the instance is drawn at ``reset(seed=s)`` before any policy acts). Learned policies act greedily: the
 most likely kind of action (pass, bid or quit), then its most likely action (``policies.learned.greedy_actions``).
@@ -15,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -32,12 +32,13 @@ from taskalloc_env.errors import run_cli
 
 DEFAULT_LEARNED = (
     ("behaviour cloning (CBGABI)", str(resources.folder("models") / "train_small_bc" / "bc.json")),
-    ("PPO from scratch", "train_small"),
-    ("BC + PPO", "train_small_bc"),
+    ("SB3 PPO from scratch", "train_small"),
+    ("SB3 BC + PPO", "train_small_bc"),
+    ("MAPPO attention", "mappo_small"),
+    ("MAPPO attention, curriculum", "mappo_mixture"),
 )
 SCRIPTED = (("random", "random"), ("CBGA", "cbga"), ("CBGABI", "cbgabi"))
 CENTRALISED = (("SGAMA (centralised greedy)", "sgama"), ("exact optimum", "exact"))
-BEGIN, END = "<!-- learning-table:begin -->", "<!-- learning-table:end -->"
 
 
 def run_rows(scenario: str, seeds: Sequence[int], learned: Sequence[tuple[str, str]]) -> list[dict[str, Any]]:
@@ -88,15 +89,6 @@ def markdown(rows: Sequence[dict[str, Any]], seeds: Sequence[int]) -> str:
     return "\n".join(lines)
 
 
-def update_doc(path: Path, table: str) -> None:
-    """Replace the text between the table markers of ``path``."""
-    text = path.read_text()
-    if BEGIN not in text or END not in text:
-        raise SystemExit(f"{path} has no {BEGIN} … {END} block to update")
-    block = f"{BEGIN}\n{table}\n{END}"
-    path.write_text(re.sub(re.escape(BEGIN) + ".*?" + re.escape(END), lambda _: block, text, flags=re.S))
-
-
 def main(argv: list[str] | None = None) -> str:
     parser = argparse.ArgumentParser(prog="python -m evaluation.heldout", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -108,7 +100,6 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--learned", action="append", metavar="LABEL=PATH",
                         help="a checkpoint row (repeatable); default: the committed models")
     parser.add_argument("--json", type=Path, help="also write per-seed scores here")
-    parser.add_argument("--update-doc", type=Path, help="rewrite the table block of this markdown file")
     args = parser.parse_args(argv)
     seeds = list(range(args.seed_start, args.seed_start + args.episodes))
     learned = [tuple(item.split("=", 1)) for item in args.learned] if args.learned else \
@@ -119,8 +110,6 @@ def main(argv: list[str] | None = None) -> str:
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({"seeds": seeds, "rows": rows}, indent=1))
-    if args.update_doc:
-        update_doc(args.update_doc, table)
     return table
 
 

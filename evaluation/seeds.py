@@ -3,12 +3,13 @@
 Seed s draws the same instance for every policy (``reset(seed=s)`` generates it before any policy acts), so a range
 of seeds is a fixed set of problems. Held-out test seeds ``10_000 …`` (the tables in ``docs/learning.md``) are never
 seen in training; training's periodic evaluation uses validation seeds ``20_000 …``; training instances come from
-the vector env's seeding (copy c of a run with seed s starts from ``s + c``) and behaviour cloning's demonstrations
+the env copies' seeding (copy c of an SB3 run with seed s starts from ``s + c``, of a MAPPO run from
+``1000 · s + c``) and behaviour cloning's demonstrations
 from ``100_000 …``. Comparisons and experiments use seeds ``0 … N − 1``.
 """
 
 from __future__ import annotations
 
-TEST_SEEDS = range(10_000, 10_100)
+TEST_SEEDS = range(10_000, 10_200)
 VALIDATION_SEED_START = 20_000
 DEMO_SEED_START = 100_000

@@ -7,11 +7,18 @@ the logits are ``[pass, bid_0 … bid_{M−1}, quit_0 … quit_{M−1}]``, inval
   mean- and max-pooling over tasks gives a context. Each task's embedding with the context gives that task's bid
   and quit logits, the context alone the pass logit (a Deep-Sets network, Zaheer et al. 2017). No weight depends
   on M, so one set of weights serves any number of tasks.
+* ``attention``: every task's features with the agent's own features form a task token; self-attention layers
+  let the tokens see each other (a Transformer encoder without positional encoding, Vaswani et al. 2017, so the
+  tokens form a set as in the Set Transformer, Lee et al. 2019); the agent's own features, embedded, are the query
+  of one attention read-out over the tokens, which gives the context. Each token with the context gives that
+  task's bid and quit logits, the context the pass logit. Like ``pooling``, no weight depends on M or N; unlike
+  it, a task's logits can depend on every other task (which tasks compete for the same agents, which groups are
+  nearly complete), not only through a mean and a max.
 * ``mlp``: a plain MLP from the flat observation to the 1 + 2M logits (fixed M).
 
 ``NETWORKS`` names every class a checkpoint may ask for; each takes only integer sizes, so a checkpoint's
 architecture is plain JSON (``policies.checkpoint``). Training wraps these actors with a critic
-(``training.sb3_policy``).
+(``training.sb3_policy``, ``training.mappo``).
 """
 
 from __future__ import annotations
@@ -88,6 +95,50 @@ class PoolingActor(nn.Module):
         return logits.masked_fill(~mask, MASKED_LOGIT)
 
 
+class AttentionActor(nn.Module):
+    """The attention actor: task tokens that attend to each other, read out by the agent's own features."""
+
+    name: ClassVar[str] = "attention"
+
+    def __init__(self, own_size: int, task_size: int, hidden: int = 64, heads: int = 4, layers: int = 2) -> None:
+        super().__init__()
+        if hidden % heads:
+            raise ValueError(f"hidden={hidden} must be a multiple of heads={heads}")
+        self.own_size, self.task_size, self.hidden, self.heads, self.layers = own_size, task_size, hidden, heads, layers
+        self.tokens = mlp([task_size + own_size, hidden, hidden], activate_last=False)
+        self.encoder = nn.ModuleList(
+            nn.TransformerEncoderLayer(hidden, heads, dim_feedforward=2 * hidden, dropout=0.0, batch_first=True,
+                                       norm_first=True) for _ in range(layers))
+        self.norm = nn.LayerNorm(hidden)
+        self.query = mlp([own_size, hidden], activate_last=False)
+        self.read_out = nn.MultiheadAttention(hidden, heads, batch_first=True)
+        self.task_head = mlp([2 * hidden, hidden, 2], activate_last=False)
+        self.pass_head = mlp([hidden, hidden, 1], activate_last=False)
+
+    def config(self) -> dict[str, int]:
+        return {"own_size": self.own_size, "task_size": self.task_size, "hidden": self.hidden, "heads": self.heads,
+                "layers": self.layers}
+
+    def output_layers(self) -> list[nn.Linear]:
+        return [self.task_head[-1], self.pass_head[-1]]
+
+    def fits(self, own_size: int, task_size: int, n_tasks: int) -> bool:
+        return (self.own_size, self.task_size) == (own_size, task_size)
+
+    def forward(self, observation: th.Tensor, mask: th.Tensor) -> th.Tensor:
+        own, tasks = split_tasks(observation, self.own_size, self.task_size)
+        own_per_task = own.unsqueeze(1).expand(-1, tasks.shape[1], -1)
+        tokens = self.tokens(th.cat([tasks, own_per_task], dim=-1))                  # (B, M, H)
+        for layer in self.encoder:
+            tokens = layer(tokens)
+        tokens = self.norm(tokens)
+        query = self.query(own).unsqueeze(1)                                           # (B, 1, H)
+        context = (query + self.read_out(query, tokens, tokens, need_weights=False)[0]).squeeze(1)   # (B, H)
+        per_task = self.task_head(th.cat([tokens, context.unsqueeze(1).expand_as(tokens)], dim=-1))  # (B, M, 2)
+        logits = th.cat([self.pass_head(context), per_task[..., 0], per_task[..., 1]], dim=-1)
+        return logits.masked_fill(~mask, MASKED_LOGIT)
+
+
 class MlpActor(nn.Module):
     """A plain MLP on the flat observation (tied to one number of tasks)."""
 
@@ -113,7 +164,7 @@ class MlpActor(nn.Module):
         return self.actor(observation).masked_fill(~mask, MASKED_LOGIT)
 
 
-NETWORKS: dict[str, type[nn.Module]] = {cls.name: cls for cls in (PoolingActor, MlpActor)}
+NETWORKS: dict[str, type[nn.Module]] = {cls.name: cls for cls in (PoolingActor, AttentionActor, MlpActor)}
 
 
 def masked_logits(actor: nn.Module, observation: np.ndarray, action_mask: np.ndarray) -> th.Tensor:

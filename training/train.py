@@ -18,16 +18,12 @@ saving.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
 import time
-import types
-import typing
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch as th
 import yaml
 from sb3_contrib import MaskablePPO
@@ -39,13 +35,12 @@ from evaluation.episodes import evaluate, summarise
 from evaluation.seeds import DEMO_SEED_START, TEST_SEEDS, VALIDATION_SEED_START
 from policies.networks import count_parameters
 from policies.teams import scripted_env_overrides, with_teammates
-from taskalloc_env import resources
-from taskalloc_env.config import read_yaml
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
 from taskalloc_env.observation import ObservationLayout
 from training.bc import behaviour_cloning, collect_demonstrations
 from training.callbacks import EpisodeMetricsCallback, PeriodicEvalCallback
+from training.config import check_at_least, check_types, opt, parse, plain, prepare_out_dir
 from training.sb3_policy import (
     BODIES,
     TaskMaskablePolicy,
@@ -57,11 +52,6 @@ from training.sb3_policy import (
 from training.vec_env import TaskAllocVecEnv, make_env_fns
 
 ALGOS = {"maskable_ppo": (MaskablePPO, TaskMaskablePolicy), "ppo": (PPO, TaskPolicy)}
-
-
-def opt(default: Any, help: str) -> Any:
-    """A config field with an immutable default and its help text (shown by ``--help``)."""
-    return dataclasses.field(default=default, metadata={"help": help})
 
 
 @dataclasses.dataclass
@@ -129,25 +119,13 @@ class TrainConfig:
 
     def check(self) -> None:
         """Bad values raise ``ConfigError`` naming the field and what is allowed."""
-        hints = typing.get_type_hints(TrainConfig)
-        for field in dataclasses.fields(self):
-            value = getattr(self, field.name)
-            hint = hints[field.name]
-            members = typing.get_args(hint) if typing.get_origin(hint) in (typing.Union, types.UnionType) else (hint,)
-            kinds = tuple(typing.get_origin(t) or t for t in members)
-            if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
-                names = " | ".join("null" if k is type(None) else k.__name__ for k in kinds)
-                raise ConfigError(f"training field {field.name!r}: got {value!r}; allowed: {names}")
+        check_types(self)
         if self.algo not in ALGOS:
             raise ConfigError(f"training field 'algo': got {self.algo!r}; allowed: {' | '.join(sorted(ALGOS))}")
         if self.body not in BODIES:
             raise ConfigError(f"training field 'body': got {self.body!r}; allowed: {' | '.join(BODIES)}")
-        for name in ("n_envs", "n_steps", "batch_size", "n_epochs", "hidden", "torch_threads"):
-            if getattr(self, name) < 1:
-                raise ConfigError(f"training field {name!r}: got {getattr(self, name)!r}; allowed: an integer >= 1")
-        for name in ("total_steps", "bc_episodes", "eval_freq", "checkpoint_freq", "n_procs"):
-            if getattr(self, name) < 0:
-                raise ConfigError(f"training field {name!r}: got {getattr(self, name)!r}; allowed: an integer >= 0")
+        check_at_least(self, ("n_envs", "n_steps", "batch_size", "n_epochs", "hidden", "torch_threads"), 1)
+        check_at_least(self, ("total_steps", "bc_episodes", "eval_freq", "checkpoint_freq", "n_procs"), 0)
         train_seeds = set(range(self.seed, self.seed + self.n_envs))
         for label, seeds in (("test", TEST_SEEDS),
                              ("validation", range(VALIDATION_SEED_START, VALIDATION_SEED_START + self.eval_episodes)),
@@ -159,62 +137,11 @@ class TrainConfig:
 
 def load_config(argv: list[str] | None = None) -> TrainConfig:
     """``--config NAME_OR_FILE`` then ``--field value`` overrides (values parsed as YAML)."""
-    parser = argparse.ArgumentParser(prog="python -m training.train", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--config", metavar="NAME_OR_FILE",
-                        help="training config: a name from configs/training (train_small) or a YAML file")
-    for field in dataclasses.fields(TrainConfig):
-        parser.add_argument(f"--{field.name.replace('_', '-')}", dest=field.name, type=yaml.safe_load,
-                            default=argparse.SUPPRESS, metavar="VALUE",
-                            help=f"{field.metadata['help']} (default: {_default(field)})")
-    args = vars(parser.parse_args(argv))
-    values: dict[str, Any] = {}
-    source = args.pop("config", None)
-    if source is not None:
-        path = resources.named("training", source) if resources.is_name(source) else Path(source)
-        values = read_yaml(path, "training config") or {}
-        if not isinstance(values, dict):
-            raise ConfigError(f"training config {str(path)!r} must hold a mapping of TrainConfig fields")
-        unknown = sorted(set(values) - {f.name for f in dataclasses.fields(TrainConfig)})
-        if unknown:
-            raise ConfigError(f"training config {str(path)!r}: unknown fields {unknown}; known: "
-                              f"{[f.name for f in dataclasses.fields(TrainConfig)]}")
-    values.update(args)
-    cfg = TrainConfig(**{k: _coerce(k, v) for k, v in values.items()})
+    cfg = parse(TrainConfig, argv, "python -m training.train", __doc__)
     cfg.out_dir = cfg.out_dir or f"runs/{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     cfg.log_dir = cfg.log_dir or str(Path(cfg.out_dir) / "logs")
     cfg.check()
     return cfg
-
-
-def _coerce(name: str, value: Any) -> Any:
-    """YAML reads ``1e-3`` as a string and ``1`` as an int; float fields get floats."""
-    hint = typing.get_type_hints(TrainConfig)[name]
-    wants_float = hint is float or float in typing.get_args(hint)
-    if wants_float and isinstance(value, (str, int)) and not isinstance(value, bool):
-        try:
-            return float(value)
-        except ValueError:
-            raise ConfigError(f"training field {name!r}: got {value!r}; allowed: a number") from None
-    return value
-
-
-def _default(field: dataclasses.Field) -> Any:
-    if field.default_factory is not dataclasses.MISSING:
-        return field.default_factory()
-    return field.default
-
-
-def prepare_out_dir(cfg: TrainConfig) -> Path:
-    """Create ``out_dir``; refuse to replace a model already there unless ``overwrite`` (committed models stay)."""
-    out_dir = Path(cfg.out_dir)
-    existing = sorted(p.name for p in out_dir.glob("*.json")) if out_dir.is_dir() else []
-    if existing and not cfg.overwrite:
-        raise ConfigError(f"out_dir {str(out_dir)!r} already holds a model ({', '.join(existing)}); pass --overwrite "
-                          "to replace it, or choose another --out-dir")
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "eval.csv").unlink(missing_ok=True)     # a new run starts a new learning curve
-    return out_dir
 
 
 def build_model(cfg: TrainConfig, venv: TaskAllocVecEnv) -> MaskablePPO | PPO:
@@ -250,13 +177,13 @@ def validation_score(model: MaskablePPO | PPO, cfg: TrainConfig) -> dict[str, fl
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     cfg = load_config(argv)
-    out_dir, log_dir = prepare_out_dir(cfg), Path(cfg.log_dir)
+    out_dir, log_dir = prepare_out_dir(cfg.out_dir, cfg.overwrite), Path(cfg.log_dir)
     log_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "config.yaml").write_text(yaml.safe_dump(dataclasses.asdict(cfg), sort_keys=False))
     th.set_num_threads(cfg.torch_threads)
     set_random_seed(cfg.seed)
     summary: dict[str, Any] = {"command": " ".join(["python -m training.train", *(argv or sys.argv[1:])])}
-    t_start = time.perf_counter()
+    t_start, cpu_start = time.perf_counter(), time.process_time()
 
     # -- environments: every learned agent of every copy is one slot ------------------------------------------------
     venv = TaskAllocVecEnv(make_env_fns(cfg.n_envs, **cfg.env_kwargs()), scripted_agents=cfg.scripted_agents,
@@ -312,20 +239,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     venv.close()
     summary["validation"] = validation_score(model, cfg)
     summary["wall_seconds"] = round(time.perf_counter() - t_start, 1)
-    (out_dir / "summary.yaml").write_text(yaml.safe_dump(_plain(summary), sort_keys=False))
-    print(yaml.safe_dump(_plain(summary), sort_keys=False), flush=True)
+    summary["cpu_seconds"] = round(time.process_time() - cpu_start, 1)
+    (out_dir / "summary.yaml").write_text(yaml.safe_dump(plain(summary), sort_keys=False))
+    print(yaml.safe_dump(plain(summary), sort_keys=False), flush=True)
     return summary
-
-
-def _plain(value: Any) -> Any:
-    """numpy scalars → Python numbers, for YAML."""
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
 
 
 if __name__ == "__main__":

@@ -1,0 +1,362 @@
+"""The tables and curves of ``docs/learning.md``: learned configurations, several training seeds each, against the
+baselines on held-out instances.
+
+    python -m evaluation.learning_report evaluate                  # every setting; writes results/learning/
+    python -m evaluation.learning_report evaluate --only train_small --episodes 200 --jobs 2 [--backend ray]
+    python -m evaluation.learning_report render                    # rewrites the generated blocks of the doc
+
+``evaluate`` plays every row of a setting on the held-out seeds 10000 … (``evaluation.seeds.TEST_SEEDS``), through
+the experiment runner's ``run_episodes`` (seed s is the same instance for every row; ``--backend ray`` fans out over
+Ray), and writes per-seed figures to ``results/learning/heldout_<setting>.json``. Rows: the baselines (random,
+CBGA, CBGABI, SGAMA, the exact optimum where it is tractable, behaviour cloning of CBGABI) and, per learned
+configuration, one row per training seed, read from ``<runs>/<config>/seed<k>`` (the training commands'
+``--out-dir``; ``models/<name>`` for seeds that are committed models). It also copies each run's ``eval.csv`` and
+``summary.yaml`` to ``results/learning/runs/``, so that ``render`` needs nothing outside the repository.
+
+``render`` computes, per learned configuration, the mean over its seeds of each seed's mean score with a 95 %
+t-interval across seeds (Student t, k − 1 degrees of freedom), and per seed the paired comparison with CBGABI
+(and SGAMA, and the optimum) on the same instances: mean difference, paired t-test p-value and the share of the
+instances where they differ that the learned policy wins. The learning curves (validation seeds, against CBGABI
+on the same seeds) show the mean over seeds and the 95 % interval across seeds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import hashlib
+import json
+import os
+import re
+import shutil
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import yaml
+from scipy import stats
+
+from evaluation.distributed import BACKENDS
+from evaluation.episodes import Episode, default_jobs, run_episodes, skip_reason
+from evaluation.report import markdown_table
+from evaluation.stats import format_p, paired
+from taskalloc_env import resolve_config, resources
+from taskalloc_env.errors import ConfigError, run_cli
+
+OUT = Path("results") / "learning"
+DOC = Path("docs") / "learning.md"
+CURVES = Path("docs") / "learning_curves.png"
+SEEDS = (0, 1, 2)
+FIGURES = ("score", "valid_tasks", "rounds", "messages")
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+    """A learned configuration: its label, the folder name of its runs, and where each training seed's model is."""
+
+    label: str
+    name: str
+    committed: Mapping[int, str] = dataclasses.field(default_factory=dict)    # seed → committed model folder
+
+    def checkpoint(self, seed: int, runs: Path) -> Path:
+        if seed in self.committed:
+            return resources.folder("models") / self.committed[seed]
+        return runs / self.name / f"seed{seed}"
+
+
+SB3 = Config("SB3 MaskablePPO, pooling, local critic", "train_small", {0: "train_small"})
+POOLING = Config("MAPPO, pooling actor, state critic", "mappo_small_pooling")
+ATTENTION = Config("MAPPO, attention actor, state critic", "mappo_small")
+MIXTURE = Config("MAPPO attention, curriculum 4×8 → 10×20", "mappo_mixture")
+LOSS = Config("MAPPO attention, trained under 20 % loss", "mappo_loss")
+
+
+@dataclasses.dataclass(frozen=True)
+class Setting:
+    """Held-out instances of one scenario (with overrides), the baselines and the configurations played on them."""
+
+    name: str
+    title: str
+    scenario: str
+    overrides: Mapping[str, Any]
+    configs: tuple[Config, ...]
+    baselines: tuple[str, ...] = ("random", "cbga", "cbgabi", "sgama", "exact")
+    behaviour_cloning: bool = False
+
+
+SETTINGS = {s.name: s for s in (
+    Setting("train_small", "training scenario, 4 × 8, L_j ∈ {1, 2}", "train_small", {},
+            (SB3, POOLING, ATTENTION, MIXTURE), behaviour_cloning=True),
+    Setting("default", "default scenario, 10 × 20, L_j = 4", "default", {}, (SB3, ATTENTION, MIXTURE)),
+    Setting("size_8x16", "8 × 16, L_j = 3 (no model trained on it)", "default",
+            {"n_agents": 8, "n_tasks": 16, "agents_per_task": 3}, (ATTENTION, MIXTURE)),
+    Setting("size_20x40", "20 × 40, L_j = 4 (no model trained on it)", "default",
+            {"n_agents": 20, "n_tasks": 40}, (ATTENTION, MIXTURE)),
+    Setting("loss_small", "training scenario under 20 % message loss", "train_small", {"message_loss": 0.2},
+            (LOSS,)),
+    Setting("loss_default", "default scenario under 20 % message loss (a size mappo_loss never trained on)",
+            "default", {"message_loss": 0.2}, (LOSS,)),
+)}
+NAMES = {"random": "random", "cbga": "CBGA", "cbgabi": "CBGABI", "sgama": "SGAMA (centralised greedy)",
+         "exact": "exact optimum", "bc": "behaviour cloning of CBGABI (SB3, 1 seed)"}
+
+
+# -- evaluate ----------------------------------------------------------------------------------------------------
+def fingerprint(folder: Path) -> str:
+    """A short hash of a checkpoint's weights (so that a retrained model is never confused with an old one)."""
+    weights = folder / "model.safetensors" if folder.is_dir() else folder.with_suffix(".safetensors")
+    return hashlib.sha1(weights.read_bytes()).hexdigest()[:12]
+
+
+def shown(path: Path) -> str:
+    """A path relative to the working directory when it lies inside it (JSON files then do not name the machine)."""
+    return os.path.relpath(path) if path.resolve().is_relative_to(Path.cwd()) else str(path)
+
+
+def rows_to_run(setting: Setting, runs: Path) -> list[dict[str, Any]]:
+    """Every row of a setting: label, kind, solver name; learned rows carry their configuration and seed."""
+    cfg = resolve_config(setting.scenario, **setting.overrides)
+    rows = [{"label": NAMES[b], "kind": "centralised" if b in ("sgama", "exact") else "baseline", "solver": b}
+            for b in setting.baselines if not skip_reason(b, cfg)]
+    if setting.behaviour_cloning:
+        bc = resources.folder("models") / "train_small_bc" / "bc.json"
+        rows.append({"label": NAMES["bc"], "kind": "baseline", "solver": f"learned:{shown(bc)}"})
+    for config in setting.configs:
+        for seed in SEEDS:
+            folder = config.checkpoint(seed, runs)
+            if not (folder / "model.json").is_file():
+                print(f"{setting.name}: {config.label}, seed {seed}: no model at {folder}, left out", flush=True)
+                continue
+            where = shown(folder)
+            rows.append({"label": config.label, "kind": "learned", "config": config.name, "seed": seed,
+                         "solver": f"learned:{where}", "weights": fingerprint(folder), "folder": where})
+    return rows
+
+
+def evaluate(setting: Setting, episodes: int, jobs: int, backend: str, runs: Path, out: Path,
+             recompute: bool) -> Path:
+    """Play every row of ``setting`` on the held-out seeds; rows already in the JSON (same weights) are kept."""
+    from evaluation.seeds import TEST_SEEDS
+
+    seeds = list(range(TEST_SEEDS.start, TEST_SEEDS.start + episodes))
+    path = out / f"heldout_{setting.name}.json"
+    old = json.loads(path.read_text()) if path.exists() and not recompute else {}
+    kept = {_key(r): r for r in old.get("rows", [])} if old.get("seeds") == seeds else {}
+    cfg = resolve_config(setting.scenario, **setting.overrides)
+    results = []
+    for row in rows_to_run(setting, runs):
+        if _key(row) in kept:
+            results.append(kept[_key(row)])
+            continue
+        played = run_episodes([Episode(row["solver"], cfg, s) for s in seeds], jobs=jobs, backend=backend,
+                              desc=f"{setting.name}: {row['label']}" + (f" seed {row['seed']}" if "seed" in row
+                                                                        else ""))
+        results.append({**row, **{f: [e[f] for e in played] for f in FIGURES}})
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"setting": setting.name, "seeds": seeds, "rows": results}, indent=0) + "\n")
+        if row["kind"] == "learned":
+            archive_logs(Path(row["folder"]), out / "runs" / row["config"] / f"seed{row['seed']}")
+    path.write_text(json.dumps({"setting": setting.name, "seeds": seeds, "rows": results}, indent=0) + "\n")
+    return path
+
+
+def _key(row: Mapping[str, Any]) -> tuple:
+    return row["label"], row.get("seed"), row.get("weights")
+
+
+def archive_logs(folder: Path, target: Path) -> None:
+    """A run's learning curve and summary, kept in the repository for ``render``."""
+    target.mkdir(parents=True, exist_ok=True)
+    for name in ("eval.csv", "summary.yaml", "config.yaml"):
+        if (folder / name).is_file():
+            shutil.copyfile(folder / name, target / name)
+
+
+# -- render ------------------------------------------------------------------------------------------------------
+def across_seeds(values: Sequence[float]) -> tuple[float, float]:
+    """Mean over training seeds and the half-width of its 95 % t-interval (nan for a single seed)."""
+    x = np.asarray(values, dtype=float)
+    if x.size < 2:
+        return float(x.mean()), float("nan")
+    return float(x.mean()), float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / np.sqrt(x.size))
+
+
+def _pm(mean: float, half: float, digits: int = 1, unit: str = "") -> str:
+    return f"{mean:.{digits}f}{unit}" if np.isnan(half) else f"{mean:.{digits}f} ± {half:.{digits}f}{unit}"
+
+
+def wins_where_different(a: np.ndarray, b: np.ndarray) -> str:
+    """Wins of a over b among the instances where they differ, as ``w / (w + l)``."""
+    d = a - b
+    wins, losses = int((d > 1e-9).sum()), int((d < -1e-9).sum())
+    return f"{wins}/{wins + losses}" if wins + losses else "–"
+
+
+def heldout_table(data: Mapping[str, Any]) -> str:
+    """Baselines: mean ± sd over instances. Learned configurations: mean ± 95 % CI across training seeds, and per
+    seed the paired comparison with CBGABI (Δ, p, wins where they differ) and with SGAMA."""
+    rows = data["rows"]
+    ref = {r["label"]: np.asarray(r["score"], dtype=float) for r in rows if r["kind"] != "learned"}
+    cbgabi, sgama = ref[NAMES["cbgabi"]], ref.get(NAMES["sgama"])
+    opt = ref.get(NAMES["exact"])
+    head = ["policy", "seeds", "score", "% of CBGABI", "% of optimum", "Δ vs CBGABI per seed (p)",
+            "wins vs CBGABI where they differ", "Δ vs SGAMA per seed (p)", "rounds", "messages"]
+    body = []
+    for r in rows:
+        if r["kind"] == "learned":
+            continue
+        s = np.asarray(r["score"], dtype=float)
+        pc = paired(s, cbgabi)
+        vs_sgama = "–" if sgama is None or r["label"] == NAMES["sgama"] else \
+            f"{paired(s, sgama).mean_diff:+.1f} ({format_p(paired(s, sgama).p_t)})"
+        body.append([r["label"], "–", f"{s.mean():.1f} ± {s.std(ddof=1):.1f} sd", f"{100 * pc.ratio:.1f} %",
+                     "–" if opt is None else f"{100 * s.mean() / opt.mean():.1f} %",
+                     "–" if r["label"] == NAMES["cbgabi"] else f"{pc.mean_diff:+.1f} ({format_p(pc.p_t)})",
+                     "–" if r["label"] == NAMES["cbgabi"] else wins_where_different(s, cbgabi),
+                     vs_sgama, *_protocol(r)])
+    for label in dict.fromkeys(r["label"] for r in rows if r["kind"] == "learned"):
+        runs = [r for r in rows if r["label"] == label]
+        means = [float(np.mean(r["score"])) for r in runs]
+        scores = [np.asarray(r["score"], dtype=float) for r in runs]
+        vs = [paired(s, cbgabi) for s in scores]
+        of_opt = "–" if opt is None else _pm(*across_seeds([100 * m / opt.mean() for m in means]), unit=" %")
+        body.append([f"**{label}**", len(runs), _pm(*across_seeds(means)) + " (95 % CI, seeds)",
+                     _pm(*across_seeds([100 * p.ratio for p in vs]), unit=" %"), of_opt,
+                     "; ".join(f"{p.mean_diff:+.1f} ({format_p(p.p_t)})" for p in vs),
+                     "; ".join(wins_where_different(s, cbgabi) for s in scores),
+                     "–" if sgama is None else "; ".join(f"{paired(s, sgama).mean_diff:+.1f} "
+                                                          f"({format_p(paired(s, sgama).p_t)})" for s in scores),
+                     *_protocol_mean(runs)])
+    seeds = data["seeds"]
+    return (f"Held-out seeds {seeds[0]}–{seeds[-1]} ({len(seeds)} instances, the same for every row).\n\n"
+            + markdown_table(head, body, align="lr" + "r" * (len(head) - 2)))
+
+
+def _protocol(row: Mapping[str, Any]) -> list[str]:
+    if row["kind"] == "centralised":
+        return ["–", "–"]
+    return [f"{np.mean(row['rounds']):.2f}", f"{np.mean(row['messages']):.1f}"]
+
+
+def _protocol_mean(runs: Sequence[Mapping[str, Any]]) -> list[str]:
+    return [f"{np.mean([np.mean(r['rounds']) for r in runs]):.2f}",
+            f"{np.mean([np.mean(r['messages']) for r in runs]):.1f}"]
+
+
+def read_eval(path: Path) -> dict[str, list[tuple[int, float]]]:
+    """eval.csv → per entry, (steps, score / baseline score) pairs (MAPPO's ``entry`` column; SB3's one scenario)."""
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    curves: dict[str, list[tuple[int, float]]] = {}
+    for r in rows:
+        steps = int(float(r.get("steps") or r["timesteps"]))
+        curves.setdefault(r.get("entry", "train_small"), []).append((steps, float(r["ratio"])))
+    return curves
+
+
+def plot_curves(out: Path, runs_dir: Path, configs: Sequence[Config]) -> None:
+    """Validation score / CBGABI's against agent steps: mean over seeds and the 95 % interval across seeds."""
+    entries = ("train_small", "6x12", "default", "train_small_loss20")
+    fig, axes = plt.subplots(1, len(entries), figsize=(19, 4.2), sharey=False)
+    for config in configs:
+        curves = [read_eval(p) for p in sorted((runs_dir / config.name).glob("seed*/eval.csv"))]
+        for ax, entry in zip(axes, entries):
+            per_seed = [c[entry] for c in curves if entry in c]
+            if len(per_seed) < 1:
+                continue
+            n = min(len(c) for c in per_seed)
+            steps = np.array([p[0] for p in per_seed[0][:n]])
+            ratio = np.array([[p[1] for p in c[:n]] for c in per_seed])
+            mean = ratio.mean(axis=0)
+            line = ax.plot(steps, mean, marker="o", markersize=2.5, label=f"{config.label} ({len(per_seed)} seeds)")
+            if len(per_seed) > 1:
+                half = stats.t.ppf(0.975, len(per_seed) - 1) * ratio.std(axis=0, ddof=1) / np.sqrt(len(per_seed))
+                ax.fill_between(steps, mean - half, mean + half, color=line[0].get_color(), alpha=0.2)
+    for ax, entry in zip(axes, entries):
+        ax.axhline(1.0, color="black", linestyle="--", linewidth=1)
+        ax.set_title(f"validation: {entry}")
+        ax.set_xlabel("agent steps")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("mean score / CBGABI's (same 50 seeds)")
+    axes[0].legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+
+
+def training_table(runs_dir: Path, configs: Sequence[Config]) -> str:
+    """Per run: agent steps, wall and CPU seconds, agent steps per second, the load average when it started."""
+    body = []
+    for config in configs:
+        for path in sorted((runs_dir / config.name).glob("seed*/summary.yaml")):
+            s = yaml.safe_load(path.read_text())
+            ppo = s.get("ppo", {})
+            steps = s.get("steps", ppo.get("steps"))
+            seconds = s.get("train_seconds", ppo.get("seconds"))
+            body.append([config.label, path.parent.name.removeprefix("seed"), f"{steps:,}".replace(",", " "),
+                         f"{s['wall_seconds'] / 60:.1f}", f"{s['cpu_seconds'] / 60:.1f}" if "cpu_seconds" in s else
+                         "–", f"{steps / seconds:.0f}", s.get("load_average_at_start", "–"),
+                         ", ".join(s.get("init_from", [])) or "–"])
+    return markdown_table(["configuration", "seed", "agent steps", "wall min", "CPU min", "agent steps/s",
+                           "load at start", "continues (actor, critic)"], body)
+
+
+def replace_block(text: str, name: str, block: str) -> str:
+    begin, end = f"<!-- learning:{name}:begin -->", f"<!-- learning:{name}:end -->"
+    if begin not in text or end not in text:
+        raise ConfigError(f"the doc has no {begin} … {end} block")
+    return re.sub(re.escape(begin) + ".*?" + re.escape(end), lambda _: f"{begin}\n{block}\n{end}", text, flags=re.S)
+
+
+def render(out: Path, doc: Path, curves: Path) -> None:
+    text = doc.read_text()
+    for name in SETTINGS:
+        path = out / f"heldout_{name}.json"
+        if path.exists():
+            text = replace_block(text, name, heldout_table(json.loads(path.read_text())))
+    configs = (SB3, POOLING, ATTENTION, MIXTURE, LOSS)
+    text = replace_block(text, "training", training_table(out / "runs", configs))
+    plot_curves(curves, out / "runs", configs)
+    doc.write_text(text)
+    print(f"rewrote {doc} and {curves}")
+
+
+# -- command line ------------------------------------------------------------------------------------------------
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m evaluation.learning_report", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+    ev = sub.add_parser("evaluate", help="play every row on the held-out seeds, write results/learning/*.json")
+    ev.add_argument("--only", nargs="+", choices=sorted(SETTINGS), default=None, help="settings (default: all)")
+    ev.add_argument("--episodes", type=int, default=200, help="held-out instances per setting (default 200)")
+    ev.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes (default: every core)")
+    ev.add_argument("--backend", choices=BACKENDS, default="local", help="local processes or Ray tasks")
+    ev.add_argument("--runs", type=Path, default=Path("runs"),
+                    help="folder of the training runs: <runs>/<config>/seed<k> (default runs)")
+    ev.add_argument("--recompute", action="store_true", help="replay rows already in the JSON files")
+    for p in (ev, sub.add_parser("render", help="rewrite the generated blocks of the doc and the curves")):
+        p.add_argument("--out", type=Path, default=OUT, help=f"results folder (default {OUT})")
+    rd = sub.choices["render"]
+    rd.add_argument("--doc", type=Path, default=DOC, help=f"the markdown file to rewrite (default {DOC})")
+    rd.add_argument("--curves", type=Path, default=CURVES, help=f"the learning-curve PNG (default {CURVES})")
+    args = parser.parse_args(argv)
+    if args.command == "render":
+        render(args.out, args.doc, args.curves)
+        return 0
+    if args.episodes < 2 or args.jobs < 1:
+        raise ConfigError("--episodes needs at least 2 instances and --jobs at least 1")
+    for name in args.only or SETTINGS:
+        path = evaluate(SETTINGS[name], args.episodes, args.jobs, args.backend, args.runs, args.out, args.recompute)
+        print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(run_cli(main))
