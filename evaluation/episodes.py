@@ -65,8 +65,8 @@ class Episode:
 def skip_reason(solver: str, cfg: TaskAllocConfig) -> str | None:
     """Why ``solver`` does not apply to ``cfg`` (None if it does): CBBA needs every L_j = 1, exact small sizes."""
     key = solver.lower()
-    if key == "cbba" and max_required_agents(cfg) > 1:
-        return "CBBA assigns single-agent tasks only (every L_j = 1)"
+    if key in ("cbba", "acbba") and max_required_agents(cfg) > 1:
+        return f"{key.upper()} assigns single-agent tasks only (every L_j = 1)"
     if key == "exact" and (cfg.n_agents > MAX_AGENTS or cfg.n_tasks > MAX_TASKS):
         return f"exact enumerates; at most {MAX_AGENTS} agents x {MAX_TASKS} tasks"
     return None

@@ -5,12 +5,13 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from policies.base import Policy
-from policies.scripted import CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
+from policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
 
 FACTORIES: dict[str, Callable[..., Policy]] = {
     "random": RandomPolicy,
     "pass": PassPolicy,
     "cbba": CBBAPolicy,
+    "acbba": ACBBAPolicy,
     "cbga": CBGAPolicy,
     "cbga+tq": lambda **kw: CBGAPolicy(task_quitting=True, **kw),
     "cbga+tb": lambda **kw: CBGAPolicy(team_bidding=True, **kw),
@@ -20,7 +21,8 @@ POLICY_NAMES = (*FACTORIES, "learned:<checkpoint>")
 
 
 def make_policy(name: str, **kwargs) -> Policy:
-    """``random``, ``pass``, ``cbba``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi`` or ``learned:<checkpoint>``."""
+    """``random``, ``pass``, ``cbba``, ``acbba``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi`` or
+    ``learned:<checkpoint>``."""
     key = name.lower()
     if key.startswith("learned:"):
         from policies.learned import LearnedPolicy

@@ -4,6 +4,11 @@ An agent's observation vector is ``[own features | task 0 features | … | task 
 are divided by the largest task reward c̄, so the gain, the group total and the displaced bid add up to the team
 value of thesis (5.5) in the same unit. ``ObservationLayout`` names every column so policies (scripted or
 learned) can slice the vector without magic numbers.
+
+Features that exist only in some modes are appended to every task's block only there, so observations of the
+default environment (and the models trained on it) keep their size: ``member_silence`` on a faulty network,
+``released`` with pop-up tasks. A task not yet released is invisible: its whole block is zero. Under
+``consensus="acbba"`` the own feature ``passed`` marks an agent whose builder is not ready (it may only pass).
 """
 
 from __future__ import annotations
@@ -42,6 +47,12 @@ TASK_FEATURES = (
 # only on a faulty network (lost or delayed messages, failing agents), where silence carries information
 FAULT_FEATURES = (
     "member_silence",     # rounds since i last heard from or about its quietest fellow member / silence_timeout, ≤ 1
+)
+
+
+# only with pop-up tasks (popup_tasks > 0), whose release carries information
+POPUP_FEATURES = (
+    "released",           # the task is known (pop-up tasks are invisible before their release, Johnson §4.1.3)
 )
 
 
@@ -136,7 +147,8 @@ class ObservationBuilder:
     def __init__(self, protocol: Protocol, max_agents_per_task: int, max_rounds: int) -> None:
         """``max_agents_per_task`` and ``max_rounds`` bound every instance the env can draw (for the space)."""
         s = protocol.scenario
-        names = TASK_FEATURES + (FAULT_FEATURES if protocol.cfg.faulty else ())
+        names = (TASK_FEATURES + (FAULT_FEATURES if protocol.cfg.faulty else ())
+                 + (POPUP_FEATURES if protocol.cfg.popup_tasks else ()))
         self.layout = ObservationLayout(s.n_tasks, len(s.equipment_names), names)
         self.low, self.high = self.layout.bounds(max_agents_per_task, max_rounds, s.n_agents)
         self.scales = Scales.of(s)
@@ -184,6 +196,9 @@ class ObservationBuilder:
             np.fill_diagonal(silence, 0.0)
             members = kn.bids > 0                                                               # (N, N, M)
             f[:, :, col("member_silence")] = np.minimum(np.where(members, silence[:, :, None], 0.0).max(axis=1), 1.0)
+        if "released" in self.layout.task_names:
+            f[:, :, col("released")] = protocol.released
+            f[:, ~protocol.released, :] = 0.0
         own = np.zeros((s.n_agents, self.layout.own_size))
         own[:, :3] = s.agent_pos / self.scales.arena
         own[:, 3] = s.agent_speed / self.scales.max_speed
@@ -210,13 +225,14 @@ def state_vector(protocol: Protocol) -> np.ndarray:
     s = protocol.scenario
     scales = Scales.of(s)
     window_start, window_end = scales.window(s)
+    known = protocol.released                   # a pop-up task is invisible before its release
     parts = [
         (s.agent_pos / scales.arena).ravel(),
         s.agent_equipment.astype(float).ravel(),
-        (s.task_pos / scales.arena).ravel(),
-        window_start,
-        window_end,
-        s.task_agents / s.n_agents,
+        (s.task_pos / scales.arena * known[:, None]).ravel(),
+        window_start * known,
+        window_end * known,
+        s.task_agents / s.n_agents * known,
         (protocol.knowledge.own_bids() / scales.reward_unit).ravel(),
         [min(protocol.round / protocol.max_rounds, 1.0)],
     ]
