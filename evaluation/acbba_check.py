@@ -123,6 +123,11 @@ def report(verdicts: Sequence[Verdict]) -> tuple[str, bool]:
     lines = [f"{n} static scenarios (seeds {verdicts[0].seed}–{verdicts[-1].seed}):" if n else "no scenarios"]
     for key in ("converged", "agreement", "conflict-free"):
         lines.append(f"  ACBBA {key:<14} {counts[key]:>5} / {n}")
+    for key, name in (("converged", "not converged"), ("agreement", "not in agreement"),
+                      ("conflict_free", "with conflicts")):
+        odd = [v.seed for v in verdicts if not getattr(v, key)]
+        if odd:
+            lines.append(f"  seeds {name}: {odd[:20]}{' …' if len(odd) > 20 else ''}")
     if any(v.equal is not None for v in verdicts):
         lines.append(f"  ACBBA = CBBA         {counts['equal']:>5} / {n}")
         lines.append(f"  differ, explained    {counts['differ, explained']:>5}   (stale information, a run ≠ SGA)")

@@ -41,6 +41,8 @@ ACTION_NAMES = ("leave & no-rebroadcast", "update & rebroadcast", "update† & r
                 "reset & rebroadcast*", "leave & rebroadcast*", "update time (adopt) & rebroadcast")
 DEFAULT_ROW = 0          # a condition no cell covers: the header's "default: leave & rebroadcast" (line 832)
 ROW11 = ("update", "trust_later")
+OUTBID_TIME = ("bump", "sender")
+EQUAL_BIDS = ("leave", "trust_later")
 ROW15 = ("leave_bump", "leave", "empty")
 TIES = ("lowest_id", "higher_id")
 TIME_REFRESH = ("epsilon", "now")
@@ -48,8 +50,8 @@ TIME_REFRESH = ("epsilon", "now")
 
 def decide(receiver: np.ndarray | int, sender: np.ndarray | int, z_k: np.ndarray, y_k: np.ndarray, t_k: np.ndarray,
            z_i: np.ndarray, y_i: np.ndarray, t_i: np.ndarray, *, row11: str = "update", row15: str = "leave_bump",
-           row20_guard: bool = True, row28_guard: bool = True,
-           ties: str = "lowest_id") -> tuple[np.ndarray, np.ndarray]:
+           row20_guard: bool = True, row28_guard: bool = True, ties: str = "lowest_id",
+           equal_bids: str = "trust_later") -> tuple[np.ndarray, np.ndarray]:
     """(action, row) of receiver i for each task of a message from sender k (Johnson Table 4.1).
 
     ``receiver``/``sender`` broadcast against the (…, M) records; z is a winner id or NONE, y the bid (0 for none),
@@ -58,7 +60,10 @@ def decide(receiver: np.ndarray | int, sender: np.ndarray | int, z_k: np.ndarray
     (``update``) or the remark's "trusts the later timestamp" (``trust_later``); ``row15`` the cell (``leave_bump``),
     leave without the time refresh (``leave``) or answer with an empty bid (``empty``, not in the thesis);
     ``row20_guard``/``row28_guard`` add the remarks' time guards to the unconditional cells; ``ties`` is the tie
-    rule of rows 2 and 18 (``lowest_id``, line 875, or the repository's CBBA ``higher_id``).
+    rule of rows 2 and 18 (``lowest_id``, line 875, or the repository's CBBA ``higher_id``); ``equal_bids`` is what
+    a receiver does with an equal bid of another agent in row 9 and the uncovered m | n case: ``leave`` (the cell and
+    the default) or ``trust_later``, Johnson's rule for the unstable states of rows 10–11 and 26–27 (not in the
+    table for equal bids; docs/decisions.md).
     """
     i = _ids(receiver, z_i)
     k = _ids(sender, z_k)
@@ -90,7 +95,7 @@ def decide(receiver: np.ndarray | int, sender: np.ndarray | int, z_k: np.ndarray
     third = snd_k & rcv_other                                  # rows 7-11 (line 877-879)
     cell(third & y_gt & ~lt, 7, UPDATE)
     cell(third & y_lt & ~gt, 8, LEAVE)
-    cell(third & y_eq, 9, LEAVE)
+    cell(third & y_eq, 9, np.where(gt & (equal_bids == "trust_later"), UPDATE, LEAVE))
     cell(third & y_lt & gt, 10, UPDATE)
     cell(third & y_gt & lt, 11, UPDATE if row11 == "update" else LEAVE)
     cell(snd_k & rcv_none, 12, UPDATE)                         # row 12 (line 881)
@@ -117,6 +122,7 @@ def decide(receiver: np.ndarray | int, sender: np.ndarray | int, z_k: np.ndarray
     cell(differ & y_lt & ~gt, 25, LEAVE)
     cell(differ & y_lt & gt, 26, UPDATE)
     cell(differ & y_gt & lt, 27, LEAVE)
+    cell(differ & y_eq & gt & (equal_bids == "trust_later"), DEFAULT_ROW, UPDATE)
     cell(snd_m & rcv_none, 28, np.where(lt & row28_guard, LEAVE, UPDATE))   # row 28 (lines 899-901)
     # -- sender thinks nobody ---------------------------------------------------------------------------------
     cell(snd_none & rcv_i, 29, LEAVE_REFRESH)                  # row 29 (line 903)
@@ -129,13 +135,15 @@ def decide(receiver: np.ndarray | int, sender: np.ndarray | int, z_k: np.ndarray
 
 
 def apply(action: np.ndarray, receiver: np.ndarray | int, now: int, z_i: np.ndarray, y_i: np.ndarray,
-          t_i: np.ndarray, z_k: np.ndarray, y_k: np.ndarray, t_k: np.ndarray,
-          refresh: str = "epsilon") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+          t_i: np.ndarray, z_k: np.ndarray, y_k: np.ndarray, t_k: np.ndarray, refresh: str = "epsilon",
+          outbid_time: str = "sender") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The receiver's new (z, y, t) after ``action`` at tick ``now``, and whether the task is rebroadcast.
 
     ``refresh`` is how far a winner moves its own time (``UPDATE_TIME``, ``LEAVE_REFRESH``): past t_kj by ε
     (``epsilon``, line 875) or to the current time (``now``, line 871); either only "if it is necessary to make it
-    later" (line 891).
+    later" (line 891). ``outbid_time`` is the time an outbid receiver gives the winner's record (``OUTBID``):
+    ``bump``, the † reading (later than its own losing time, line 875), or ``sender``, the sender's time as a plain
+    update does (our option: the bump can outdate the winner's own later withdrawal, docs/decisions.md).
     """
     i = _ids(receiver, z_i)
     take = (action == UPDATE) | (action == OUTBID)
@@ -146,7 +154,10 @@ def apply(action: np.ndarray, receiver: np.ndarray | int, now: int, z_i: np.ndar
     t = np.where(action == ADOPT_TIME, t_k, t)
     refreshed = (action == UPDATE_TIME) | (action == LEAVE_REFRESH)
     t = np.where(refreshed & (t_i <= t_k), later_than(t_k, i, now, refresh), t)
-    t = np.where(action == OUTBID, np.where(t_k > t_i, t_k, later_than(t_i, i, now, "epsilon")), t)
+    if outbid_time == "bump":
+        t = np.where(action == OUTBID, np.where(t_k > t_i, t_k, later_than(t_i, i, now, "epsilon")), t)
+    else:
+        t = np.where(action == OUTBID, t_k, t)
     current = stamp(now, i)                                    # the empty bid "with current time", later than t_kj
     t = np.where(empty, np.where(current > t_k, current, later_than(t_k, i, now, "epsilon")), t)
     return z, y, t, action != LEAVE_QUIET

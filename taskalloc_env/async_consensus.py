@@ -109,9 +109,10 @@ def _single_tasks(kn: LocalKnowledge, times: Times, receivers: np.ndarray, sende
     t_k = np.stack([msg.time[idx] for msg in messages])
     action, _ = acbba_table.decide(receivers, senders, z_k, y_k, t_k, z_i, y_i, t_i, row11=cfg.acbba_row11,
                                    row15=cfg.acbba_row15, row20_guard=cfg.acbba_row20_guard,
-                                   row28_guard=cfg.acbba_row28_guard, ties=cfg.acbba_ties)
+                                   row28_guard=cfg.acbba_row28_guard, ties=cfg.acbba_ties,
+                                   equal_bids=cfg.acbba_equal_bids)
     z, y, t, rebroadcast = acbba_table.apply(action, receivers, now, z_i, y_i, t_i, z_k, y_k, t_k,
-                                             cfg.acbba_time_refresh)
+                                             cfg.acbba_time_refresh, cfg.acbba_outbid_time)
     moved = carried & ((z != z_i) | (y != y_i))
     r, j = np.nonzero(moved)
     kn.set_single_columns(receivers[r], idx[j], z[r, j], y[r, j])

@@ -86,6 +86,8 @@ class AsyncProtocol(Protocol):
         self.broadcast_log: list[tuple[int, int, int]] = []   # (tick, sender, data items) of every broadcast
         self.quiet = False
         self.local = False
+        self.bundle_tick = 0                                  # the last tick any bundle changed
+        self._bundles_seen: list[list[int]] = []
         self.inbox[:] = True                                  # the initial tasks enter every listener at tick 0
         self._schedule_builds()
 
@@ -133,14 +135,16 @@ class AsyncProtocol(Protocol):
         c.data_items_sent += sent.data_items
 
     def _withdrawn(self, agent: int, tasks: list[int], held: np.ndarray) -> None:
-        """Tasks ``agent`` held (``held``) and gave up: empty bids (single-agent) or withdrawn entries, stamped now."""
+        """Bundle tasks ``agent`` gave up, stamped now: an empty bid for a single-agent task it still ``held`` (one it
+        was outbid on keeps the new winner's record), a withdrawn entry for every multi-agent task."""
+        single = self.knowledge.single
         for j in tasks:
-            if not held[j]:
-                continue
-            if self.knowledge.single[j]:
+            if single[j] and held[j]:
                 self.times.task[agent, j] = stamp(self.round, agent)
-            else:
+            elif not single[j]:
                 self.times.entry[agent, agent, j] = stamp(self.round, agent)
+            else:
+                continue
             self.outgoing[agent, j] = True
 
     # -- one tick --------------------------------------------------------------------------------------------------
@@ -178,6 +182,8 @@ class AsyncProtocol(Protocol):
         c.rounds = now
         if not np.array_equal(kn.bids, before) or kn.bundles != bundles_before:
             c.rounds_to_agreement, c.messages_to_agreement = now, c.messages
+        if kn.bundles != self._bundles_seen:
+            self.bundle_tick, self._bundles_seen = now, [list(b) for b in kn.bundles]
         self._check_convergence()
         self._touch()
 
@@ -253,8 +259,10 @@ class AsyncProtocol(Protocol):
         self.inbox[start] = False
 
     def _release_lost(self) -> None:
-        """Ready agents release the first task they were outbid on and every task after it (Module 1, line 773);
-        the new winner's record of the lost task stays, the later tasks they held go out as empty bids."""
+        """Ready agents release the first task they were outbid on and every task after it (Module 1, line 773).
+        The later tasks they held go out as empty bids. On a single-agent task the new winner's record of the lost
+        task stays; on a multi-agent task the agent withdraws its displaced entry with the current time, so that no
+        agent that still lists it re-admits it (the member decides its own membership; our rule)."""
         kn = self.knowledge
         own = kn.own_bids()
         for i in np.flatnonzero(self.ready):
@@ -263,9 +271,8 @@ class AsyncProtocol(Protocol):
             lost = next((j for j in sequence if own[i, j] <= 0), None)
             if lost is None:
                 continue
-            held = own[i] > 0
             released = kn.release(i, lost, self.cfg.release_order)
-            self._withdrawn(i, released, held)
+            self._withdrawn(i, [lost, *released], own[i] > 0)
             self._dirty.add(i)
 
     # -- failures --------------------------------------------------------------------------------------------------
@@ -327,6 +334,14 @@ class AsyncProtocol(Protocol):
                 c.local_tick = int(self.quiet_since[live].max(initial=0)) + self.cfg.separation_time + 1
         self.quiet, self.local = self.quiet or quiet, self.local or local
         self.converged = self.local if self.cfg.local_termination else self.quiet
+
+    @property
+    def livelocked(self) -> bool:
+        """Not converged, and for the later half of the run agents kept broadcasting while no bundle changed: the
+        signature of the row-15 loop and of stale bids refreshed against their owner's withdrawal (note §8.22;
+        docs/decisions.md)."""
+        talking = any(tick > self.bundle_tick for tick, _, _ in self.broadcast_log)
+        return not self.converged and talking and self.round - self.bundle_tick > self.round // 2
 
     @property
     def globally_converged(self) -> bool:

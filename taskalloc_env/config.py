@@ -59,6 +59,8 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "popup_arrivals": ("periodic", "poisson"),
     "termination": ("auto", "global", "local"),
     "acbba_row11": ("update", "trust_later"),
+    "acbba_equal_bids": ("leave", "trust_later"),
+    "acbba_outbid_time": ("bump", "sender"),
     "acbba_row15": ("leave_bump", "leave", "empty"),
     "acbba_time_refresh": ("epsilon", "now"),
     "acbba_ties": ("lowest_id", "higher_id"),
@@ -163,6 +165,8 @@ class TaskAllocConfig:
     termination: str = "auto"
     confirmations: int | None = None
     acbba_row11: str = "update"
+    acbba_equal_bids: str = "trust_later"
+    acbba_outbid_time: str = "sender"
     acbba_row15: str = "leave_bump"
     acbba_row20_guard: bool = True
     acbba_row28_guard: bool = True

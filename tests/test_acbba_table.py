@@ -59,7 +59,11 @@ CELLS = [
     ("7: y_k > y_i, t_k = t_i", (K, 6.0, T(10, M)), (M, 5.0, T(10, M)), tb.UPDATE, (K, 6.0, T(10, M)), {}),
     ("8: y_k < y_i, t_k < t_i", (K, 4.0, T(8, K)), (M, 5.0, T(10, M)), tb.LEAVE, "same", {}),
     ("8: y_k < y_i, t_k = t_i", (K, 4.0, T(10, M)), (M, 5.0, T(10, M)), tb.LEAVE, "same", {}),
-    ("9: y_k = y_i", (K, 5.0, T(12, K)), (M, 5.0, T(10, M)), tb.LEAVE, "same", {}),
+    ("9: y_k = y_i, newer: trust the later time (equal_bids default)", (K, 5.0, T(12, K)), (M, 5.0, T(10, M)),
+     tb.UPDATE, (K, 5.0, T(12, K)), {}),
+    ("9: y_k = y_i, older: leave", (K, 5.0, T(8, K)), (M, 5.0, T(10, M)), tb.LEAVE, "same", {}),
+    ("9: equal_bids=leave (the cell)", (K, 5.0, T(12, K)), (M, 5.0, T(10, M)), tb.LEAVE, "same",
+     {"equal_bids": "leave"}),
     ("10: y_k < y_i, t_k > t_i", (K, 4.0, T(12, K)), (M, 5.0, T(10, M)), tb.UPDATE, (K, 4.0, T(12, K)), {}),
     ("11: y_k > y_i, t_k < t_i (cell: update)", (K, 6.0, T(8, K)), (M, 5.0, T(10, M)), tb.UPDATE,
      (K, 6.0, T(8, K)), {}),
@@ -108,7 +112,10 @@ CELLS = [
     ("25: y_k < y_i, t_k ≤ t_i", (M, 4.0, T(8, M)), (N, 5.0, T(10, N)), tb.LEAVE, "same", {}),
     ("26: y_k < y_i, t_k > t_i", (M, 4.0, T(12, M)), (N, 5.0, T(10, N)), tb.UPDATE, (M, 4.0, T(12, M)), {}),
     ("27: y_k > y_i, t_k < t_i", (M, 6.0, T(8, M)), (N, 5.0, T(10, N)), tb.LEAVE, "same", {}),
-    ("0: m | n with equal bids: the default", (M, 5.0, T(12, M)), (N, 5.0, T(10, N)), tb.LEAVE, "same", {}),
+    ("0: m | n with equal bids, newer: trust the later time", (M, 5.0, T(12, M)), (N, 5.0, T(10, N)), tb.UPDATE,
+     (M, 5.0, T(12, M)), {}),
+    ("0: m | n with equal bids, equal_bids=leave: the default", (M, 5.0, T(12, M)), (N, 5.0, T(10, N)), tb.LEAVE,
+     "same", {"equal_bids": "leave"}),
     # -- sender thinks m, receiver thinks none (row 28, lines 899-901) --
     ("28: newer time: update", (M, 6.0, T(12, M)), (E, 0.0, T(10, I)), tb.UPDATE, (M, 6.0, T(12, M)), {}),
     ("28: older time, guard on: leave", (M, 6.0, T(8, M)), (E, 0.0, T(10, I)), tb.LEAVE, "same", {}),
@@ -127,7 +134,7 @@ CELLS = [
     ("32: older: rebroadcast own", (E, 0.0, T(8, K)), (E, 0.0, T(10, M)), tb.LEAVE, "same", {}),
 ]
 
-TABLE_OPTIONS = ("row11", "row15", "row20_guard", "row28_guard", "ties")
+TABLE_OPTIONS = ("row11", "row15", "row20_guard", "row28_guard", "ties", "equal_bids")
 
 
 def _run(sender, receiver, options, vectorised=False):
