@@ -36,7 +36,7 @@ import numpy as np
 
 from evaluation.episodes import default_jobs
 from evaluation.report import markdown_table
-from policies import make_policy, rollout
+from policies import make_policy
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.errors import run_cli
 
@@ -48,7 +48,7 @@ PROFILES = {
     "Fig 4-2: all 35 tasks at the start": {},
     "Fig 4-3: 10 tasks, then one every 0.2 s": {"popup_tasks": 25, "popup_period": 200},
     "Fig 4-4: 10 tasks, then one every 0.05 s": {"popup_tasks": 25, "popup_period": 50},
-    "Fig 4-4 regime: one every 5 ms (faster than a burst)": {"popup_tasks": 25, "popup_period": 5},
+    "Fig 4-4 regime: one every 5 ms (< a burst)": {"popup_tasks": 25, "popup_period": 5},
 }
 FAULTS = {"perfect links": {}, "20 % loss": {"message_loss": 0.2}, "delay 0–3 ticks": {"max_delay": 3},
           "20 % loss + delay 0–3": {"message_loss": 0.2, "max_delay": 3}}
@@ -59,16 +59,26 @@ def episode(args: tuple[str, dict[str, Any], int]) -> dict[str, Any]:
     """Run ``policy`` on ``config`` with ``seed``; the figures and, for ACBBA, the broadcast ticks."""
     policy, config, seed = args
     env = TaskAllocEnv(**config)
-    alloc = rollout(env, make_policy(policy), seed=seed)
+    agent = make_policy(policy)
+    obs, infos = env.reset(seed=seed)
+    agent.start(env, seed)
+    steps = changed_step = 0
+    while env.agents:                       # env steps: the common unit (one decision per agent per step)
+        last = env.protocol.counters.rounds_to_agreement
+        obs, _, _, _, infos = env.step(agent.act({a: obs[a] for a in env.agents}, infos))
+        steps += 1
+        changed_step = steps if env.protocol.counters.rounds_to_agreement != last else changed_step
+    alloc = env.evaluate()
     c, p = alloc.counters, env.protocol
     row = {"policy": policy, "seed": seed, "score": alloc.score, "converged": alloc.converged,
            "conflicts": len(alloc.conflicts), "agreement": alloc.agreement, "paths": alloc.paths,
            "link_messages": c.messages_sent, "received": c.messages, "changed": c.rounds_to_agreement,
-           "time": c.rounds}
+           "time": c.rounds, "steps": steps, "changed_step": changed_step}
     if env.config.asynchronous:
         row.update(broadcasts=c.broadcasts, quiet=c.quiet_tick, local=c.local_tick, separation=c.separation_ticks,
                    records=sum(items for _, _, items in p.broadcast_log) / 4, time=c.quiet_tick,
-                   ticks=[t for t, _, _ in p.broadcast_log], releases=sorted(set(p.release_tick.tolist()) - {0}))
+                   ticks=[t for t, _, _ in p.broadcast_log], items=[n for _, _, n in p.broadcast_log],
+                   releases=sorted(set(p.release_tick.tolist()) - {0}))
     else:                       # every live agent broadcasts its table once per round
         row.update(broadcasts=c.rounds * env.config.n_agents)
     return row
@@ -95,16 +105,17 @@ def write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
 
 
 # -- Figs 4-2, 4-3, 4-4 -----------------------------------------------------------------------------------------------
-def bursts(row: dict[str, Any]) -> tuple[list[int], list[int]]:
-    """Broadcasts after each pop-up release until the next one, and how long each burst lasted (ticks)."""
-    ticks = np.asarray(row["ticks"])
+def bursts(row: dict[str, Any]) -> tuple[list[int], list[float], list[int]]:
+    """Per pop-up release until the next one: broadcasts, task records broadcast, and how long the burst lasted."""
+    ticks, records = np.asarray(row["ticks"]), np.asarray(row["items"]) / 4
     edges = [*row["releases"], np.inf]
-    sizes, lengths = [], []
+    sizes, carried, lengths = [], [], []
     for start, nxt in itertools.pairwise(edges):
-        burst = ticks[(ticks >= start) & (ticks < nxt)]
-        sizes.append(len(burst))
-        lengths.append(int(burst.max() - start + 1) if len(burst) else 0)
-    return sizes, lengths
+        inside = (ticks >= start) & (ticks < nxt)
+        sizes.append(int(inside.sum()))
+        carried.append(float(records[inside].sum()))
+        lengths.append(int(ticks[inside].max() - start + 1) if inside.any() else 0)
+    return sizes, carried, lengths
 
 
 def profiles(seeds: int, jobs: int, out: Path) -> str:
@@ -116,22 +127,26 @@ def profiles(seeds: int, jobs: int, out: Path) -> str:
     body = []
     for name in PROFILES:
         cell = [r for r in rows if r["experiment"] == name]
-        first_second = [sum(t < 1000 / TICK_MS for t in r["ticks"]) for r in cell]
-        line = [name, f"{sum(r['converged'] for r in cell)}/{len(cell)}", mean_sd([r["broadcasts"] for r in cell]),
-                mean_sd([r["records"] for r in cell]), mean_sd(first_second),
+        second = [np.asarray(r["ticks"]) < 1000 / TICK_MS for r in cell]
+        line = [name, f"{sum(r['converged'] for r in cell)}/{len(cell)}",
+                f"{mean_sd([r['broadcasts'] for r in cell])} ({mean_sd([r['records'] for r in cell])})",
+                f"{mean_sd([s.sum() for s in second])} "
+                f"({mean_sd([np.asarray(r['items'])[s].sum() / 4 for r, s in zip(cell, second)])})",
                 mean_sd([r["quiet"] * TICK_MS for r in cell])]
         if cell[0]["releases"]:
-            sizes = [s for r in cell for s in bursts(r)[0]]
-            lengths = [d for r in cell for d in bursts(r)[1]]
-            quiet_between = np.mean([max(b for b in bursts(r)[1]) < r["releases"][1] - r["releases"][0]
-                                     for r in cell])
-            line += [mean_sd(sizes, 1), mean_sd(np.asarray(lengths) * TICK_MS, 1), f"{100 * quiet_between:.0f} %"]
+            per = [bursts(r) for r in cell]
+            sizes = [n for b in per for n in b[0]]
+            carried = [n for b in per for n in b[1]]
+            lengths = [n for b in per for n in b[2]]
+            quiet_between = np.mean([max(b[2]) < r["releases"][1] - r["releases"][0] for b, r in zip(per, cell)])
+            line += [f"{mean_sd(sizes, 1)} ({mean_sd(carried, 1)})", mean_sd(np.asarray(lengths) * TICK_MS, 1),
+                     f"{100 * quiet_between:.0f} %"]
         else:
             line += ["–", "–", "–"]
         body.append(line)
     _plot_profiles(rows, out)
-    header = ["experiment (8 agents, L = 5, 35 tasks)", "quiet", "broadcasts", "task records broadcast",
-              "broadcasts in the first second", "quiet at (ms)", "broadcasts per pop-up", "pop-up burst (ms)",
+    header = ["experiment (8 agents, L = 5, 35 tasks)", "quiet", "broadcasts (task records)",
+              "in the first second", "quiet at (ms)", "per pop-up", "pop-up burst (ms)",
               "runs quiet before each next pop-up"]
     return markdown_table(header, body)
 
@@ -145,15 +160,16 @@ def _plot_profiles(rows: list[dict[str, Any]], out: Path) -> None:
         ticks = np.asarray(row["ticks"])
         end = max(int(ticks.max(initial=0)) + BIN, 100)
         for ax, limit in zip(ax_row, (min(end, 1000), end)):
-            counts, edges = np.histogram(ticks, bins=np.arange(0, limit + BIN, BIN))
-            ax.bar(edges[:-1] * TICK_MS / 1000, counts, width=BIN * TICK_MS / 1000, align="edge", color="tab:blue")
+            width = 2 if limit <= 200 else BIN           # short runs: 2-ms bins
+            counts, edges = np.histogram(ticks, bins=np.arange(0, limit + width, width))
+            ax.bar(edges[:-1] * TICK_MS / 1000, counts, width=width * TICK_MS / 1000, align="edge", color="tab:blue")
             for release in row["releases"]:
                 if release <= limit:
                     ax.axvline(release * TICK_MS / 1000, color="tab:red", lw=0.5, alpha=0.5)
             ax.set_xlabel("time (s; 1 tick = 1 ms)")
-            ax.set_ylabel(f"broadcasts per {BIN} ms")
-        ax_row[0].set_title(f"{name}: first second" if row["releases"] else f"{name}: first second (all)")
-        ax_row[1].set_title(f"{name}: whole run ({row['broadcasts']} broadcasts)")
+            ax.set_ylabel(f"broadcasts per {width} ms")
+        ax_row[0].set_title(f"{name}: first second", fontsize=9)
+        ax_row[1].set_title(f"{name}: whole run ({row['broadcasts']} broadcasts)", fontsize=9)
     fig.tight_layout()
     fig.savefig(out / "profiles.png", dpi=110)
     plt.close(fig)
@@ -232,9 +248,11 @@ def versus(seeds: int, jobs: int, out: Path) -> str:
                          mean_sd([r["score"] for r in cell]), f"{same}/{len(cell)}" if cell is acbba else "–",
                          mean_sd([r["broadcasts"] for r in cell]), mean_sd([r["link_messages"] for r in cell]),
                          f"{mean_sd([r['changed'] for r in cell], 1)} {unit}",
-                         f"{mean_sd([r['time'] for r in cell], 1)} {unit}"])
+                         f"{mean_sd([r['time'] for r in cell], 1)} {unit}",
+                         f"{mean_sd([r['changed_step'] for r in cell], 1)} / {mean_sd([r['steps'] for r in cell], 1)}"])
     return markdown_table(["network", "algorithm", "converged", "conflict-free, agreeing", "score",
-                           "same allocation as CBBA", "broadcasts", "link messages", "last change", "declared"], body)
+                           "same allocation as CBBA", "broadcasts", "link messages", "last change", "declared",
+                           "env steps: last change / end"], body)
 
 
 COMMANDS = {"profiles": profiles, "sweep": sweep, "versus": versus}

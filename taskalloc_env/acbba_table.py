@@ -11,8 +11,9 @@ extraction; the readings are the only ones consistent with the remarks, docs/dec
 
 =================  ==============================================================================================
 ``UPDATE``         update & rebroadcast (action 1, line 826): copy (z_kj, y_kj, t_kj)
-``OUTBID``         update† & rebroadcast: copy (z_kj, y_kj); the time becomes t_kj if later than the receiver's
-                   losing time, else that time + ε ("the winning bid has a later time than the losing bid", 875)
+``OUTBID``         update† & rebroadcast (rows 1, 2, 17, 18: the receiver loses its bid): copy (z_kj, y_kj, t_kj);
+                   with ``outbid_time="bump"`` (the † reading) a time not later than the receiver's losing time
+                   becomes that time + ε ("the winning bid has a later time than the losing bid", 875)
 ``UPDATE_TIME``    update time & rebroadcast (action 5, line 871; printed "update‡" in rows 3 and 19): the
                    receiver keeps its own bid and makes its time later than t_kj if it is not (875, 891)
 ``LEAVE``          leave & rebroadcast (action 2, line 827; the table's default, line 832): own record unchanged
@@ -40,12 +41,6 @@ ACTION_NAMES = ("leave & no-rebroadcast", "update & rebroadcast", "update† & r
                 "update time & rebroadcast", "leave & rebroadcast", "leave‡ & rebroadcast",
                 "reset & rebroadcast*", "leave & rebroadcast*", "update time (adopt) & rebroadcast")
 DEFAULT_ROW = 0          # a condition no cell covers: the header's "default: leave & rebroadcast" (line 832)
-ROW11 = ("update", "trust_later")
-OUTBID_TIME = ("bump", "sender")
-EQUAL_BIDS = ("leave", "trust_later")
-ROW15 = ("leave_bump", "leave", "empty")
-TIES = ("lowest_id", "higher_id")
-TIME_REFRESH = ("epsilon", "now")
 
 
 def decide(receiver: np.ndarray | int, sender: np.ndarray | int, z_k: np.ndarray, y_k: np.ndarray, t_k: np.ndarray,

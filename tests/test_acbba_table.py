@@ -36,10 +36,14 @@ def B(time: int, by: int) -> int:
 CELLS = [
     # -- sender thinks k, receiver thinks i (rows 1-3, remark line 875) --
     ("1: y_k > y_i, sender's time later", (K, 6.0, T(12, K)), (I, 5.0, T(10, I)), tb.OUTBID, (K, 6.0, T(12, K)), {}),
-    ("1: y_k > y_i, sender's time earlier: receiver's losing time + ε", (K, 6.0, T(8, K)), (I, 5.0, T(10, I)),
-     tb.OUTBID, (K, 6.0, B(T(10, I), I)), {}),
-    ("2: tie, the sender's id is lower", (I, 5.0, T(8, I)), (K, 5.0, T(10, K)), tb.OUTBID, (I, 5.0, B(T(10, K), K)),
+    ("1: y_k > y_i, sender's time earlier: the sender's record (outbid_time default)", (K, 6.0, T(8, K)),
+     (I, 5.0, T(10, I)), tb.OUTBID, (K, 6.0, T(8, K)), {}),
+    ("1: outbid_time=bump (the † reading): receiver's losing time + ε", (K, 6.0, T(8, K)), (I, 5.0, T(10, I)),
+     tb.OUTBID, (K, 6.0, B(T(10, I), I)), {"outbid_time": "bump"}),
+    ("2: tie, the sender's id is lower", (I, 5.0, T(8, I)), (K, 5.0, T(10, K)), tb.OUTBID, (I, 5.0, T(8, I)),
      {"receiver": K, "sender": I}),
+    ("2: tie, outbid_time=bump", (I, 5.0, T(8, I)), (K, 5.0, T(10, K)), tb.OUTBID, (I, 5.0, B(T(10, K), K)),
+     {"receiver": K, "sender": I, "outbid_time": "bump"}),
     ("3: y_k < y_i: update time past the sender's", (K, 4.0, T(12, K)), (I, 5.0, T(10, I)), tb.UPDATE_TIME,
      (I, 5.0, B(T(12, K), I)), {}),
     ("3: y_k < y_i, own time already later: unchanged", (K, 4.0, T(8, K)), (I, 5.0, T(10, I)), tb.UPDATE_TIME,
@@ -91,8 +95,10 @@ CELLS = [
      tb.EMPTY, (E, 0.0, B(T(NOW, K), I)), {}),
     # -- sender thinks m, receiver thinks i (rows 17-19, lines 889-891) --
     ("17: outbid", (M, 6.0, T(12, M)), (I, 5.0, T(10, I)), tb.OUTBID, (M, 6.0, T(12, M)), {}),
-    ("17: outbid by an older record: receiver's time + ε", (M, 6.0, T(8, M)), (I, 5.0, T(10, I)), tb.OUTBID,
-     (M, 6.0, B(T(10, I), I)), {}),
+    ("17: outbid by an older record: the sender's record", (M, 6.0, T(8, M)), (I, 5.0, T(10, I)), tb.OUTBID,
+     (M, 6.0, T(8, M)), {}),
+    ("17: outbid by an older record, outbid_time=bump: receiver's time + ε", (M, 6.0, T(8, M)), (I, 5.0, T(10, I)),
+     tb.OUTBID, (M, 6.0, B(T(10, I), I)), {"outbid_time": "bump"}),
     ("18: tie, m has the lower id", (1, 5.0, T(12, 1)), (I, 5.0, T(10, I)), tb.OUTBID, (1, 5.0, T(12, 1)), {}),
     ("19: y_k < y_i: update time", (M, 4.0, T(12, M)), (I, 5.0, T(10, I)), tb.UPDATE_TIME,
      (I, 5.0, B(T(12, M), I)), {}),
@@ -143,7 +149,8 @@ def _run(sender, receiver, options, vectorised=False):
     arrays = [np.array([v]) for v in (*sender, *receiver)]
     z_k, y_k, t_k, z_i, y_i, t_i = arrays
     action, row = tb.decide(i, k, z_k, y_k, t_k, z_i, y_i, t_i, **table)
-    z, y, t, rebroadcast = tb.apply(action, i, NOW, z_i, y_i, t_i, z_k, y_k, t_k, options.get("refresh", "epsilon"))
+    z, y, t, rebroadcast = tb.apply(action, i, NOW, z_i, y_i, t_i, z_k, y_k, t_k, options.get("refresh", "epsilon"),
+                                    options.get("outbid_time", "sender"))
     return int(action[0]), int(row[0]), (int(z[0]), float(y[0]), int(t[0])), bool(rebroadcast[0]), i
 
 
@@ -169,7 +176,7 @@ def test_the_table_covers_all_32_rows_and_the_default():
 
 def test_one_vectorised_call_decides_every_cell_like_single_calls():
     """Every cell without options at once: (R, M) = (1, cells) with per-task receivers and senders."""
-    plain = [c for c in CELLS if not c[5] or set(c[5]) <= {"receiver", "sender"}]
+    plain = [c for c in CELLS if not c[5] or set(c[5]) <= {"receiver", "sender", "outbid_time"}]
     receivers = np.array([c[5].get("receiver", I) for c in plain])
     senders = np.array([c[5].get("sender", K) for c in plain])
     fields = [np.array([[c[1][f] for c in plain]]) for f in range(3)] + \
@@ -191,18 +198,21 @@ def test_every_combination_maps_to_exactly_one_action_and_never_adopts_the_recei
     for zk, zi in itertools.product(WINNERS.values(), repeat=2):
         if zk == zi and zk in (N,):
             continue
-        for yk, yi, tk, ti, guard, refresh in itertools.product((0.0, 5.0, 6.0), (0.0, 5.0, 6.0), times, times,
-                                                                 (True, False), ("epsilon", "now")):
+        for yk, yi, tk, ti, guard, refresh, outbid in itertools.product((0.0, 5.0, 6.0), (0.0, 5.0, 6.0), times,
+                                                                         times, (True, False), ("epsilon", "now"),
+                                                                         ("sender", "bump")):
             yk_, yi_ = (0.0 if zk == E else yk), (0.0 if zi == E else yi)
             args = [np.array([v]) for v in (zk, yk_, tk, zi, yi_, ti)]
             action, row = tb.decide(I, K, *args, row20_guard=guard, row28_guard=guard)
             assert 0 <= action[0] < len(tb.ACTION_NAMES) and 0 <= row[0] <= 32
-            z, _, t, _ = tb.apply(action, I, NOW, args[3], args[4], args[5], args[0], args[1], args[2], refresh)
+            z, _, t, _ = tb.apply(action, I, NOW, args[3], args[4], args[5], args[0], args[1], args[2], refresh,
+                                  outbid)
             assert z[0] != I or zi == I
             if zi == I and z[0] != I:
                 assert row[0] in (1, 2, 17, 18)
-            if action[0] != tb.UPDATE and action[0] != tb.LEAVE_QUIET and action[0] != tb.LEAVE:
-                assert t[0] >= ti or action[0] == tb.ADOPT_TIME
+            moved = action[0] not in (tb.UPDATE, tb.LEAVE_QUIET, tb.LEAVE, tb.ADOPT_TIME)
+            if moved and (action[0] != tb.OUTBID or outbid == "bump"):
+                assert t[0] >= ti                      # refreshes and † bumps never move a time backwards
 
 
 def test_stamps_are_ordered_unique_and_bumps_stay_within_their_tick():
