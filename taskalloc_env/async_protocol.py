@@ -66,6 +66,7 @@ class AsyncProtocol(Protocol):
         self.silence_timeout = cfg.silence_timeout or 2 * (self.graph.diameter + 1) * hop
 
     def reset(self) -> None:
+        """Tick 0: per-agent processing times drawn, empty times and buffers; the initial tasks wake every builder."""
         super().reset()
         n, m = self.scenario.n_agents, self.scenario.n_tasks
         lo, hi = self.cfg.message_ticks
