@@ -4,5 +4,6 @@ Sits above ``policies`` (it runs them) and below ``training`` (which evaluates i
 ``episodes`` (one run per (solver, seed), in processes), ``stats`` (paired statistics), ``report`` (tables and
 plots), ``compare`` (every baseline on one scenario), ``experiments`` (the sources' experiments as YAML),
 ``heldout`` (the learned-policy table on held-out seeds), ``convergence`` (convergence under the scoring options),
-``seeds`` (which seed ranges serve which purpose).
+``seeds`` (which seed ranges serve which purpose), ``fuzz`` (random configs and invariants), ``acbba_check`` (ACBBA
+against synchronous CBBA on random static scenarios) and ``acbba_experiments`` (Johnson's ACBBA figures).
 """

@@ -74,8 +74,8 @@ class Episode:
 def skip_reason(solver: str, cfg: TaskAllocConfig) -> str | None:
     """Why ``solver`` does not apply to ``cfg`` (None if it does): CBBA needs every L_j = 1, exact small sizes."""
     key = solver.lower()
-    if key == "cbba" and max_required_agents(cfg) > 1:
-        return "CBBA assigns single-agent tasks only (every L_j = 1)"
+    if key in ("cbba", "acbba") and max_required_agents(cfg) > 1:
+        return f"{key.upper()} assigns single-agent tasks only (every L_j = 1)"
     if key == "cbba-duo" and (max_required_agents(cfg) > 1 or cfg.prerequisites or cfg.comm_range is not None):
         return "preferred-duo CBBA splits single-agent tasks without prerequisites, with full communication"
     if key == "exact" and (cfg.n_agents > MAX_AGENTS or cfg.n_tasks > MAX_TASKS):
@@ -144,7 +144,7 @@ def solve(solver: str | Policy, env: TaskAllocEnv, seed: int) -> Allocation:
         return table[solver.lower()][1](env.unwrapped.scenario, env.config)
     policy = policy_for(solver) if isinstance(solver, str) else solver
     unwrapped = env.unwrapped
-    if isinstance(policy, CBGAPolicy) and not unwrapped.config.faulty:
+    if isinstance(policy, CBGAPolicy) and not (unwrapped.config.stochastic or unwrapped.config.asynchronous):
         # the scripted consensus policies through the protocol directly: the same allocation and counters as the
         # rollout (tests/test_fast.py), without the env's observations, rewards and infos
         env.reset(seed=seed)

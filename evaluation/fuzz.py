@@ -4,14 +4,17 @@
     python -m evaluation.fuzz --episodes 20000 --seed 7 --jobs 2
 
 Each episode draws a config (sizes, L_j, equipment mixes, prerequisite chains, communication range, every named
-scoring and protocol option, message loss, bursts, delays and failing agents), a policy (random, CBGA and its
-variants, CBBA where every L_j = 1) and a seed, runs it and checks:
+scoring and protocol option, message loss, bursts, delays and failing agents, pop-up tasks, the asynchronous
+consensus ``acbba`` with its processing times and table options), a policy (random, CBGA and its variants, CBBA and
+ACBBA where every L_j = 1) and a seed, runs it and checks:
 
 * ``spaces``: every observation lies in its space, every mask is binary int8 with pass allowed, every action the
   policy takes is allowed;
 * ``return``: the episode return × reward_scale equals ``evaluate().score``;
 * ``converged``: the episode ends by convergence, not by the round bound (lost and delayed messages and failing
-  agents included);
+  agents included); under ``acbba`` on a network that is not fully connected, the documented livelock of Johnson's
+  row 15 (docs/decisions.md) is the one exception, recognised by a task whose time keeps being bumped while no bundle
+  changes;
 * ``agreement`` and ``conflict-free``: at convergence on a connected network every live agent holds the same table
   and no task has more than L_j members (thesis §3.2: the consensus reaches a conflict-free allocation);
 * ``valid groups``: every valid task has exactly L_j members whose equipment covers it, and its prerequisites are
@@ -44,8 +47,10 @@ CHECKS = ("spaces", "return", "converged", "agreement", "conflict-free", "valid 
 POLICIES = ("random", "cbga", "cbga+tb", "cbga+tq", "cbgabi")
 
 
-def draw_config(rng: np.random.Generator) -> dict[str, Any]:
-    """A random config over every option (small sizes, so that thousands of episodes run in minutes)."""
+def draw_config(rng: np.random.Generator, extra: np.random.Generator) -> dict[str, Any]:
+    """A random config over every option (small sizes, so that thousands of episodes run in minutes). Pop-up tasks
+    and the asynchronous consensus come from ``extra``, a second stream, so the other options of a seed are drawn
+    as before they existed."""
     n_agents, n_tasks = int(rng.integers(2, 8)), int(rng.integers(2, 10))
     kw: dict[str, Any] = {"n_agents": n_agents, "n_tasks": n_tasks,
                           "start_time_range": [0.0, float(rng.choice([10.0, 30.0, 60.0]))],
@@ -79,6 +84,24 @@ def draw_config(rng: np.random.Generator) -> dict[str, Any]:
         kw[field] = str(rng.choice(values))
     if rng.random() < 0.3:
         kw["max_bundle"] = int(rng.integers(1, 4))
+    if extra.random() < 0.3:                            # pop-up tasks (releases), in every consensus mode
+        kw["popup_tasks"] = int(extra.integers(1, n_tasks + 1))
+        kw["popup_period"] = int(extra.choice([1, 5, 20]))
+        kw["popup_arrivals"] = str(extra.choice(["periodic", "poisson"]))
+        kw["mission_time_per_tick"] = float(extra.choice([0.0, 0.5]))
+    if extra.random() < 0.35:                           # the asynchronous consensus (async_protocol)
+        kw["consensus"] = "acbba"
+        low = float(extra.choice([0.0, 0.1]))
+        kw["message_ticks"] = [low, low + float(extra.choice([0.0, 0.3]))]
+        kw["build_ticks"] = [int(extra.integers(0, 2)), int(extra.integers(2, 4))]
+        kw["separation_time"] = int(extra.choice([5, 25]))
+        kw["termination"] = str(extra.choice(["auto", "global", "local"]))
+        for field, values in (("acbba_row11", ["update", "trust_later"]), ("acbba_row15", ["leave_bump", "leave"]),
+                              ("acbba_time_refresh", ["epsilon", "now"]), ("acbba_ties", ["lowest_id", "higher_id"]),
+                              ("acbba_equal_bids", ["trust_later", "leave"]),
+                              ("acbba_outbid_time", ["bump", "sender"])):
+            kw[field] = str(extra.choice(values))
+        kw["acbba_row20_guard"] = kw["acbba_row28_guard"] = bool(extra.random() < 0.8)
     if rng.random() < 0.4:                              # an imperfect network (network.Network)
         kw["message_loss"] = float(rng.choice([0.0, 0.1, 0.3]))
         kw["max_delay"] = int(rng.integers(0, 3))
@@ -102,7 +125,7 @@ def run_case(case: tuple[dict[str, Any], str, int]) -> dict[str, Any]:
 
 
 def _episode(kw: dict[str, Any], policy: Any, seed: int, verdict: dict[str, Any] | None) -> str:
-    env = TaskAllocEnv(**kw, reward_scale=10.0, invalid_action="raise", **policy.env_overrides)
+    env = TaskAllocEnv(**{**kw, **policy.env_overrides}, reward_scale=10.0, invalid_action="raise")
     digest = hashlib.sha256()
     obs, infos = env.reset(seed=seed)
     policy.start(env, seed)
@@ -124,9 +147,11 @@ def _episode(kw: dict[str, Any], policy: Any, seed: int, verdict: dict[str, Any]
         protocol = env.protocol
         live = protocol.alive
         connected = bool((protocol.live_graph.component[live] == np.flatnonzero(live)[0]).all())
+        complete = bool(protocol.graph.adjacency.sum() == len(live) * (len(live) - 1))
+        livelock = env.config.asynchronous and not complete and protocol.livelocked
         verdict.update({"spaces": spaces_ok, "return": abs(total * env.reward_scale - allocation.score) < 1e-6,
-                        "converged": allocation.converged})
-        at_rest = allocation.converged and connected
+                        "converged": allocation.converged or livelock})
+        at_rest = allocation.globally_converged and connected
         verdict["agreement"] = allocation.agreement if at_rest else None
         verdict["conflict-free"] = not allocation.conflicts if at_rest else None
         verdict["valid groups"] = _valid_groups(env, allocation)
@@ -154,13 +179,15 @@ def _valid_groups(env: TaskAllocEnv, allocation: Any) -> bool:
 
 
 def cases(episodes: int, seed: int) -> list[tuple[dict[str, Any], str, int]]:
-    rng = np.random.default_rng(seed)
+    rng, extra = np.random.default_rng(seed), np.random.default_rng([seed, 2])
     out = []
     for _ in range(episodes):
-        kw = draw_config(rng)
+        kw = draw_config(rng, extra)
         single = kw.get("task_mix") is None and max(np.atleast_1d(kw["agents_per_task"])) == 1
-        names = (*POLICIES, "cbba") if single else POLICIES
-        out.append((kw, str(rng.choice(names)), int(rng.integers(2**31))))
+        name = str(rng.choice((*POLICIES, "cbba") if single else POLICIES))
+        if single and extra.random() < 0.2:
+            name = "acbba"
+        out.append((kw, name, int(rng.integers(2**31))))
     return out
 
 

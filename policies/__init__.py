@@ -6,10 +6,11 @@ from policies.base import Policy
 from policies.centralised import exact, sgama
 from policies.registry import POLICY_NAMES, make_policy
 from policies.rollout import rollout
-from policies.scripted import CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
+from policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
 
 __all__ = [
     "POLICY_NAMES",
+    "ACBBAPolicy",
     "CBBAPolicy",
     "CBGAPolicy",
     "PassPolicy",

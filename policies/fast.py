@@ -33,8 +33,12 @@ def solve(scenario: Scenario, config: TaskAllocConfig, policy: str | CBGAPolicy,
         raise ValueError(f"the direct solver runs the scripted consensus policies (CBBA, CBGA and variants), "
                          f"not {policy!r}")
     config = config.replace(**policy.env_overrides) if policy.env_overrides else config
-    if config.faulty:
-        raise ValueError("the direct solver needs perfect links: a faulty network draws from the env's generator")
+    if config.asynchronous:
+        raise ValueError("the direct solver runs the synchronous protocol; the asynchronous consensus (acbba) runs "
+                         "through the env")
+    if config.stochastic:
+        raise ValueError("the direct solver needs a protocol that draws nothing (perfect links, no Poisson pop-ups): "
+                         "random draws come from the env's generator")
     protocol = Protocol(scenario, config)
     unit, float_type = Scales.of(scenario).reward_unit, np.dtype(dtype)
     m = scenario.n_tasks

@@ -11,12 +11,13 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from policies.base import Policy
-from policies.scripted import CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
+from policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
 
 FACTORIES: dict[str, Callable[..., Policy]] = {
     "random": RandomPolicy,
     "pass": PassPolicy,
     "cbba": CBBAPolicy,
+    "acbba": ACBBAPolicy,
     "cbga": CBGAPolicy,
     "cbga+tq": lambda **kw: CBGAPolicy(task_quitting=True, **kw),
     "cbga+tb": lambda **kw: CBGAPolicy(team_bidding=True, **kw),
@@ -51,7 +52,7 @@ def parse_name(name: str) -> tuple[str, dict[str, int]]:
 
 
 def make_policy(name: str, **kwargs) -> Policy:
-    """``random``, ``pass``, ``cbba``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi`` (``cbga+tq:delta=3``,
+    """``random``, ``pass``, ``cbba``, ``acbba``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi`` (``cbga+tq:delta=3``,
     ``cbgabi:delta=3``: with the quit threshold δ) or ``learned:<checkpoint>``."""
     if name.lower().startswith("learned:"):
         from policies.learned import LearnedPolicy

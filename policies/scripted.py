@@ -1,4 +1,4 @@
-"""Scripted baselines that read only the observation: CBBA, CBGA and its variants, random, always-pass.
+"""Scripted baselines that read only the observation: CBBA, ACBBA, CBGA and its variants, random, always-pass.
 
 Bundle construction (thesis §3.2.2, Alg 5): among the valid bids (the action mask: eligibility filters and the
 outbid test h_ij, Alg 5 l. 8–20), pick the largest marginal gain c_ij (J_i = argmax_j c_ij·h_ij, Alg 5 l. 21), one
@@ -108,6 +108,20 @@ class CBBAPolicy(CBGAPolicy):
         super().start(env, seed)
         if self.env.config.task_mix is not None or (self.env.scenario.task_agents > 1).any():
             raise ValueError("CBBA assigns single-agent tasks only (every L_j = 1); use CBGAPolicy for L_j > 1")
+
+
+class ACBBAPolicy(CBBAPolicy):
+    """ACBBA (Johnson §4.1): CBBA's greedy rule in the asynchronous environment. A ready builder bids its best valid
+    task, one per tick ("the module attempts to build its bundle identically to CBBA", Johnson §4.1.1), and passes
+    when none is left, which completes the build and rebroadcasts; agents that are not ready only pass."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.name = "ACBBA"
+
+    @property
+    def env_overrides(self) -> dict[str, Any]:
+        return {"consensus": "acbba"}
 
 
 class RandomPolicy(Policy):

@@ -38,6 +38,14 @@ class Counters:
     conflicting_bids: int = 0
     dropped_agents: int = 0
     silent_releases: int = 0
+    # the asynchronous consensus (consensus="acbba", Johnson §4.1.3): broadcasts (one per flush of an outgoing buffer,
+    # however many agents hear it: Johnson's "1 message"), the tick the network went quiet (global convergence, 0: not
+    # reached), the tick every agent had heard nothing relevant for longer than separation_time (local convergence,
+    # 0: not reached), and the longest gap between two relevant messages at one agent (the separation time observed)
+    broadcasts: int = 0
+    quiet_tick: int = 0
+    local_tick: int = 0
+    separation_ticks: int = 0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,6 +62,8 @@ class Allocation:
     counters: Counters = dataclasses.field(default_factory=Counters)   # how the run got there (a copy)
     converged: bool = True
     agreement: bool = True                      # every agent of a component holds the same table
+    globally_converged: bool = True             # no message in flight and nothing left to change (async: quiet)
+    locally_converged: bool = True              # async: every agent past its separation time; sync: = converged
 
     @classmethod
     def from_paths(cls, model: ScoringModel, paths: Sequence[Sequence[int]], conflict_policy: str = "first_L_paid",
@@ -85,4 +95,5 @@ class Allocation:
     def summary(self) -> dict[str, Any]:
         """The scalar figures (what infos and result tables carry)."""
         return {"score": self.score, "valid_tasks": self.n_valid, "conflicts": len(self.conflicts),
-                **dataclasses.asdict(self.counters), "converged": self.converged, "agreement": self.agreement}
+                **dataclasses.asdict(self.counters), "converged": self.converged, "agreement": self.agreement,
+                "globally_converged": self.globally_converged, "locally_converged": self.locally_converged}

@@ -8,7 +8,9 @@ One flat, frozen :class:`TaskAllocConfig` holds three groups of fields:
   ``prereq_timing``, ``reward_split``, ``conflict_policy``, ``marginal_gain``;
 * protocol (thesis §3.2–§5.2; Johnson §3.4.1): ``cbba_table``, ``prereq_mode``, ``release_order``,
   ``task_quitting``, ``delta``, ``reset_on``, ``quit_block``, ``require_known_capacity``, ``consensus``,
-  ``max_bundle``, ``max_rounds``.
+  ``max_bundle``, ``max_rounds``; the network (``message_loss`` …); pop-up tasks (``popup_*``,
+  ``mission_time_per_tick``; Johnson §4.1.3) and the asynchronous consensus ``consensus="acbba"`` (``message_ticks``,
+  ``build_ticks``, ``separation_time``, ``termination``, ``acbba_*``; Johnson §4.1).
 
 The named options mark points the sources leave open or state in more than one way; docs/configuration.md gives
 the source of each and docs/decisions.md the reasons for the defaults. Configs come from YAML files in
@@ -27,7 +29,7 @@ from typing import Any
 
 import yaml
 
-from taskalloc_env import resources
+from taskalloc_env import resources, stamps
 from taskalloc_env.errors import ConfigError
 
 # every real-valued field lies within ±MAX_MAGNITUDE: far beyond any sensible unit, and small enough that
@@ -50,10 +52,18 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "release_order": ("bundle", "path"),
     "reset_on": ("additions", "any_change"),
     "quit_block": ("until_joined", "none"),
-    "consensus": ("sync", "every_step"),
+    "consensus": ("sync", "every_step", "acbba"),
     "outbid_ties": ("strict", "higher_id"),
     "reward_time": ("arrival", "start"),
     "loss_model": ("independent", "gilbert_elliott"),
+    "popup_arrivals": ("periodic", "poisson"),
+    "termination": ("auto", "global", "local"),
+    "acbba_row11": ("update", "trust_later"),
+    "acbba_equal_bids": ("leave", "trust_later"),
+    "acbba_outbid_time": ("bump", "sender"),
+    "acbba_row15": ("leave_bump", "leave", "empty"),
+    "acbba_time_refresh": ("epsilon", "now"),
+    "acbba_ties": ("lowest_id", "higher_id"),
 }
 
 
@@ -142,6 +152,26 @@ class TaskAllocConfig:
     dropout_rounds: tuple[int, int] = (1, 10)
     dropout_schedule: tuple[tuple[int, int], ...] | None = None
     silence_timeout: int | None = None
+    # -- pop-up tasks (Johnson §4.1.3, Figs 4-3/4-4): the last popup_tasks task ids appear during the episode --
+    popup_tasks: int = 0
+    popup_period: int = 200
+    popup_arrivals: str = "periodic"
+    popup_times: tuple[int, ...] | None = None
+    mission_time_per_tick: float = 0.0
+    # -- the asynchronous consensus, consensus = "acbba" (Johnson §4.1; times in ticks) --
+    message_ticks: tuple[float, float] = (0.0, 0.2)
+    build_ticks: tuple[int, int] = (1, 3)
+    separation_time: int = 25
+    termination: str = "auto"
+    confirmations: int | None = None
+    acbba_row11: str = "update"
+    acbba_equal_bids: str = "trust_later"
+    acbba_outbid_time: str = "sender"
+    acbba_row15: str = "leave_bump"
+    acbba_row20_guard: bool = True
+    acbba_row28_guard: bool = True
+    acbba_time_refresh: str = "epsilon"
+    acbba_ties: str = "lowest_id"
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -155,6 +185,35 @@ class TaskAllocConfig:
         """Whether messages can be lost or delayed, or agents fail (the network is not perfect)."""
         return (self.message_loss > 0 or self.loss_model == "gilbert_elliott" or self.max_delay > 0
                 or self.dropouts > 0 or bool(self.dropout_schedule))
+
+    @property
+    def asynchronous(self) -> bool:
+        """The asynchronous consensus (ACBBA): one env step is one tick of a global clock."""
+        return self.consensus == "acbba"
+
+    @property
+    def stochastic(self) -> bool:
+        """Whether the protocol draws random numbers: network faults, Poisson pop-up arrivals, or processing times
+        drawn from a range (the environment then hands it a generator spawned from its seeded one)."""
+        poisson = self.popup_tasks > 0 and self.popup_times is None and self.popup_arrivals == "poisson"
+        spread = self.asynchronous and (self.message_ticks[0] < self.message_ticks[1]
+                                        or self.build_ticks[0] < self.build_ticks[1])
+        return self.faulty or poisson or spread
+
+    @property
+    def local_termination(self) -> bool:
+        """The asynchronous episode ends at local convergence (separation time) rather than at network quiet:
+        ``termination="local"``, or ``auto`` with pop-up tasks (Johnson §4.1.3: with pop-ups "it does not make sense
+        to define the idea of global convergence")."""
+        return self.termination == "local" or (self.termination == "auto" and self.popup_tasks > 0)
+
+    @property
+    def confirmation_count(self) -> int:
+        """Full-state announcements an asynchronous agent makes before it declares local convergence:
+        ``confirmations``, or (None) 2 when messages can be lost and 0 otherwise (our rule, docs/decisions.md)."""
+        if self.confirmations is not None:
+            return self.confirmations
+        return 2 if self.message_loss > 0 or self.loss_model == "gilbert_elliott" else 0
 
     @property
     def speed_internal(self) -> float:
@@ -231,7 +290,7 @@ def _validate(cfg: TaskAllocConfig) -> None:
         _check_positive_int("max_bundle", cfg.max_bundle)
     if cfg.max_rounds is not None:
         _check_positive_int("max_rounds", cfg.max_rounds)
-    for name in ("require_known_capacity", "task_quitting", "bid_warping"):
+    for name in ("require_known_capacity", "task_quitting", "bid_warping", "acbba_row20_guard", "acbba_row28_guard"):
         if not isinstance(getattr(cfg, name), bool):
             _fail(name, getattr(cfg, name), "true | false")
     _check_positive_int("delta", cfg.delta, minimum=0)
@@ -261,6 +320,8 @@ def _validate(cfg: TaskAllocConfig) -> None:
             _fail("dropout_schedule", cfg.dropout_schedule, "each agent at most once")
     if cfg.silence_timeout is not None:
         _check_positive_int("silence_timeout", cfg.silence_timeout)
+    _check_popups(cfg)
+    _check_asynchronous(cfg)
     if cfg.agent_types is not None and (
             not cfg.agent_types or len(set(cfg.agent_types)) != len(cfg.agent_types)
             or not all(isinstance(t, str) and t for t in cfg.agent_types)):
@@ -301,6 +362,37 @@ def _validate(cfg: TaskAllocConfig) -> None:
                   f"chains * length <= n_tasks = {cfg.n_tasks}")
 
 
+def _check_popups(cfg: TaskAllocConfig) -> None:
+    _check_positive_int("popup_tasks", cfg.popup_tasks, minimum=0)
+    if cfg.popup_tasks > cfg.n_tasks:
+        _fail("popup_tasks", cfg.popup_tasks, f"at most n_tasks = {cfg.n_tasks}")
+    _check_positive_int("popup_period", cfg.popup_period)
+    if cfg.popup_times is not None:
+        if len(cfg.popup_times) != cfg.popup_tasks:
+            _fail("popup_times", cfg.popup_times, f"one release tick per pop-up task (popup_tasks = {cfg.popup_tasks})")
+        for tick in cfg.popup_times:
+            _check_positive_int("popup_times", tick, minimum=0)
+    _check_number("mission_time_per_tick", cfg.mission_time_per_tick)
+
+
+def _check_asynchronous(cfg: TaskAllocConfig) -> None:
+    for name in ("message_ticks", "build_ticks"):
+        pair = getattr(cfg, name)
+        if len(pair) != 2:
+            _fail(name, pair, "two tick counts [fewest, most]")
+    _check_number("message_ticks", cfg.message_ticks[0])
+    _check_number("message_ticks", cfg.message_ticks[1], minimum=cfg.message_ticks[0])
+    _check_positive_int("build_ticks", cfg.build_ticks[0], minimum=0)
+    _check_positive_int("build_ticks", cfg.build_ticks[1], minimum=cfg.build_ticks[0])
+    _check_positive_int("separation_time", cfg.separation_time)
+    if cfg.confirmations is not None:
+        _check_positive_int("confirmations", cfg.confirmations, minimum=0)
+    if cfg.asynchronous and cfg.n_agents > stamps.MAX_AGENTS:
+        _fail("n_agents", cfg.n_agents, f"at most {stamps.MAX_AGENTS} with consensus acbba (timestamp stamper ids)")
+    if cfg.asynchronous and cfg.max_rounds is not None and cfg.max_rounds > stamps.MAX_TICKS:
+        _fail("max_rounds", cfg.max_rounds, f"at most {stamps.MAX_TICKS} ticks with consensus acbba")
+
+
 def _as_tuple(name: str, value: Any) -> tuple:
     if isinstance(value, (list, tuple)):
         return tuple(value)
@@ -328,7 +420,11 @@ def _normalise(name: str, value: Any) -> Any:
                      for v in _as_tuple(name, value))
     if name in ("agent_types", "agent_type_counts") and value is not None:
         return _as_tuple(name, value)
-    if name == "dropout_rounds":
+    if name in ("dropout_rounds", "build_ticks"):
+        return _as_tuple(name, value)
+    if name == "message_ticks":
+        return tuple(float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in _as_tuple(name, value))
+    if name == "popup_times" and value is not None:
         return _as_tuple(name, value)
     if name == "dropout_schedule" and value is not None:
         return tuple(tuple(entry) if isinstance(entry, (list, tuple)) else entry for entry in _as_tuple(name, value))
@@ -351,7 +447,7 @@ def _normalise(name: str, value: Any) -> Any:
         _check_record(name, value, ("chains", "length", "followup_window"), required="chains")
         return PrerequisiteChains(**value)
     if name in ("speed", "reward", "time_discount", "distance_discount", "window", "duration", "comm_range",
-                "message_loss", "burst_enter", "burst_leave", "burst_loss") \
+                "message_loss", "burst_enter", "burst_leave", "burst_loss", "mission_time_per_tick") \
             and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
     return value
@@ -466,3 +562,24 @@ def max_required_agents(cfg: TaskAllocConfig) -> int:
 def round_bound(n_tasks: int, n_agents: int, max_agents_per_task: int, diameter: int) -> int:
     """T_max = 10 · max(N_m, N_n · max L_j) · D rounds (our choice; the thesis gives no bound for CBGA)."""
     return 10 * max(n_tasks, n_agents * max_agents_per_task) * max(1, diameter)
+
+
+def release_horizon(cfg: TaskAllocConfig) -> int:
+    """The latest tick (round) at which a pop-up task can be released: the last of ``popup_times``, or
+    ``popup_tasks`` · ``popup_period`` (the last periodic release; Poisson arrivals are drawn within it)."""
+    if cfg.popup_times:
+        return max(cfg.popup_times)
+    return cfg.popup_tasks * cfg.popup_period
+
+
+def episode_bound(cfg: TaskAllocConfig, n_tasks: int, n_agents: int, max_agents_per_task: int, diameter: int) -> int:
+    """T_max of an episode: ``max_rounds``, or the round bound after the last release. With ``consensus="acbba"``
+    the bound is in ticks: a round of the bound is stretched to 2 + ``max_delay`` + the slowest build + N_n times
+    the slowest message time (our choice: a bid crosses a hop in at most that many ticks, plus the session tick)."""
+    if cfg.max_rounds:
+        return cfg.max_rounds
+    bound = round_bound(n_tasks, n_agents, max_agents_per_task, diameter)
+    if cfg.asynchronous:
+        bound *= 2 + cfg.max_delay + cfg.build_ticks[1] + math.ceil(n_agents * cfg.message_ticks[1])
+    bound += release_horizon(cfg)
+    return min(bound, stamps.MAX_TICKS) if cfg.asynchronous else bound

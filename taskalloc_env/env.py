@@ -10,7 +10,8 @@ Action space           ``Discrete(1 + 2M)``: 0 pass, 1..M bid on task j−1, M+1
 Observation space      ``Dict(observation=Box(D,) float64, action_mask=Box(0, 1, (1 + 2M,), int8))``
 State space            ``Box`` of agent/task attributes, every agent's own bids and the round
 Reward                 cooperative, potential-based: every agent gets Δ team score (÷ ``reward_scale``)
-Termination            the allocation converged (no table changed for D + 1 rounds; our stopping rule)
+Termination            the allocation converged (no table changed for D + 1 rounds; our stopping rule; under
+                       ``acbba``: the network went quiet, or every agent converged locally, Johnson §4.1.3)
 Truncation             ``max_cycles`` steps, or the round bound T_max (``max_rounds``)
 =====================  ==============================================================================
 
@@ -18,9 +19,16 @@ Each step is one decision per agent in the bundle phase of CBGA (thesis §3.2.2,
 at the agent's best path slot, the bid being its marginal gain (3.11)), *quit* a multi-agent task (thesis §5.2.2,
 Alg 9, only with ``task_quitting``), or *pass*. The consensus protocol between agents is the environment's dynamics
 (``consensus="sync"``: once every agent has passed, the network exchanges messages and agents release what they
-were outbid on; ``"every_step"``: after every step). The action mask allows exactly the bids the protocol deems
-valid (eligibility and the outbid test h_ij) and the quits it allows; a passed agent may only pass until the
-round ends.
+were outbid on; ``"every_step"``: after every step; ``"acbba"``: asynchronous, one step is one tick of a global clock,
+see ``async_protocol``). The action mask allows exactly the bids the protocol deems valid (eligibility and the outbid
+test h_ij) and the quits it allows; a passed agent may only pass until the round ends.
+
+Asynchronous mode (``consensus="acbba"``, Johnson §4.1): every live agent stays in ``agents`` and gets an observation
+and a mask every step (PettingZoo's parallel convention: all live agents act simultaneously); an agent whose bundle
+builder is not ready this tick has a mask that allows only pass, and its ``passed`` feature and info are set. A ready
+agent bids, quits, or passes, which completes its build and broadcasts its outgoing buffer. Pop-up tasks
+(``popup_tasks``) are invisible (zero features, masked) until released, in every consensus mode; the observation then
+gains a per-task ``released`` feature.
 
 Constructor arguments: ``scenario`` (a name from ``configs/scenarios``, a YAML path, a
 :class:`~taskalloc_env.config.TaskAllocConfig`, a mapping, or a fixed :class:`~taskalloc_env.scenario.Scenario`),
@@ -48,7 +56,8 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from taskalloc_env.allocation import Allocation
-from taskalloc_env.config import TaskAllocConfig, max_required_agents, resolve_config, round_bound
+from taskalloc_env.async_protocol import AsyncProtocol
+from taskalloc_env.config import TaskAllocConfig, episode_bound, max_required_agents, resolve_config
 from taskalloc_env.errors import ConfigError, InvalidActionError
 from taskalloc_env.observation import ObservationBuilder, state_vector
 from taskalloc_env.protocol import Protocol, check_memory
@@ -106,7 +115,9 @@ class TaskAllocEnv(ParallelEnv):
         self._window = None
         # spaces depend only on counts and on bounds that hold for every instance, so they are built once
         probe = self.fixed_scenario or generate(self.config, np.random.default_rng(0))
-        probe_protocol = Protocol(probe, self.config)
+        protocol_class = AsyncProtocol if self.config.asynchronous else Protocol
+        self._protocol_class = protocol_class
+        probe_protocol = protocol_class(probe, self.config)
         if self.fixed_scenario is not None:
             self._max_agents_per_task = int(probe.task_agents.max())
             self._max_rounds = probe_protocol.max_rounds
@@ -114,7 +125,7 @@ class TaskAllocEnv(ParallelEnv):
             self._max_agents_per_task = max_required_agents(self.config)
             # the largest diameter any instance can have: 1 fully connected, n − 1 for agents in a line
             diameter = 1 if self.config.comm_range is None else max(1, n - 1)
-            self._max_rounds = self.config.max_rounds or round_bound(m, n, self._max_agents_per_task, diameter)
+            self._max_rounds = episode_bound(self.config, m, n, self._max_agents_per_task, diameter)
         builder = ObservationBuilder(probe_protocol, self._max_agents_per_task, self._max_rounds)
         self.observation_layout = builder.layout
         self._observation_space = spaces.Dict({
@@ -161,13 +172,13 @@ class TaskAllocEnv(ParallelEnv):
         if seed is not None:
             self._np_random, self._np_random_seed = seeding.np_random(seed)
         scenario = self.fixed_scenario or generate(self.config, self._np_random)
-        # faults draw from a generator spawned from the env's own (after the instance), so episodes replay from the
-        # seed; a perfect network draws nothing, so it leaves the env's random stream as it was
-        network_rng = np.random.default_rng(self._np_random.integers(2**63)) if self.config.faulty else None
-        self._protocol = Protocol(scenario, self.config, rng=network_rng)
+        # faults, Poisson arrivals and processing times draw from a generator spawned from the env's own (after the
+        # instance), so episodes replay from the seed; a config that draws nothing leaves the env's stream as it was
+        protocol_rng = np.random.default_rng(self._np_random.integers(2**63)) if self.config.stochastic else None
+        self._protocol = self._protocol_class(scenario, self.config, rng=protocol_rng)
         self._builder = ObservationBuilder(self._protocol, self._max_agents_per_task, self._max_rounds)
         self.agents = list(self.possible_agents)
-        self._passed = np.zeros(len(self.possible_agents), dtype=bool)
+        self._passed = self._waiting()
         self._steps = 0
         self._last_score = 0.0
         self._done = False
@@ -188,9 +199,11 @@ class TaskAllocEnv(ParallelEnv):
         protocol.counters.invalid_actions += len(flags)
         self.invalid_action_reasons = flags
         view = protocol.view()
+        m = self.config.n_tasks
         for i, action in decisions:
-            m = self.config.n_tasks
             if action == PASS:
+                if self.config.asynchronous and protocol.ready[i]:
+                    protocol.finish(i)                      # the build completes: rebroadcast
                 self._passed[i] = True
             elif action <= m:
                 protocol.bid(i, action - 1, view=view)
@@ -199,8 +212,10 @@ class TaskAllocEnv(ParallelEnv):
                 protocol.quit(i, action - m - 1)
                 self._passed[i] = False
         self._steps += 1
-        round_over = self.config.consensus == "every_step" or bool(self._passed.all())
-        if round_over:
+        if self.config.asynchronous:
+            protocol.advance()
+            self._passed = self._waiting()
+        elif self.config.consensus == "every_step" or bool(self._passed.all()):
             protocol.end_round()
             self._passed[:] = ~protocol.alive                  # a failed agent takes no further part
         score = protocol.score().score
@@ -226,6 +241,13 @@ class TaskAllocEnv(ParallelEnv):
         if self.render_mode == "human" and (self.render_path is None or not self.agents):
             self.render()
         return observations, rewards, terminations, truncations, infos
+
+    def _waiting(self) -> np.ndarray:
+        """(N,) agents that may only pass: none at the start of a synchronous round; under ``acbba`` every agent whose
+        bundle builder is not ready this tick."""
+        if self.config.asynchronous:
+            return ~self.protocol.ready
+        return np.zeros(len(self.possible_agents), dtype=bool)
 
     def _read_actions(self, actions: Mapping[str, Any], flags: dict[str, str]) -> list[tuple[int, int]]:
         """Validate the action dict against the live agents and their masks; apply ``invalid_action``."""
@@ -281,6 +303,8 @@ class TaskAllocEnv(ParallelEnv):
 
     def _why_masked(self, agent: str, action: int) -> str:
         i, m = self.agent_index[agent], self.config.n_tasks
+        if self._passed[i] and self.config.asynchronous:
+            return "the agent's bundle builder is not ready this tick (it has no news, or its build is still running)"
         if self._passed[i]:
             return "the agent passed this round and may only pass until the round ends"
         if action <= m:

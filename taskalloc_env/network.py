@@ -1,7 +1,8 @@
 """Who hears whom, and when: the communication graph and the ``Network`` that delivers messages.
 
 A round of consensus (thesis §3.2.3, Phase 2) has two halves: *sending* — every live agent broadcasts a snapshot of its
-own table to its neighbours (``consensus.snapshot``) — and *delivery*, decided here: which receiver gets which
+own table to its neighbours (``consensus.snapshot``; under ``consensus="acbba"`` an agent broadcasts when its bundle
+build completes, ``async_protocol``) — and *delivery*, decided here: which receiver gets which
 message, and in which round. The consensus rules (``consensus.exchange``) only see the messages that arrive, so they
 never need to know how the network behaves. ``Network`` composes the graph with a loss model and a delay:
 
@@ -196,6 +197,10 @@ class Network:
     def in_flight(self) -> np.ndarray:
         """The send rounds of the messages still travelling."""
         return self._queue[2]
+
+    def travelling(self) -> set[tuple[int, int]]:
+        """(sender, send round) of the messages still travelling: the payloads a protocol must still keep."""
+        return set(zip(self._queue[1].tolist(), self._queue[2].tolist()))
 
 
 def make_network(graph: CommGraph, cfg: TaskAllocConfig, rng: np.random.Generator) -> Network:

@@ -4,6 +4,11 @@ An agent's observation vector is ``[own features | task 0 features | … | task 
 are divided by the largest task reward c̄, so the gain, the group total and the displaced bid add up to the team
 value of thesis (5.5) in the same unit. ``ObservationLayout`` names every column so policies (scripted or
 learned) can slice the vector without magic numbers.
+
+Features that exist only in some modes are appended to every task's block only there, so observations of the
+default environment (and the models trained on it) keep their size: ``member_silence`` on a faulty network,
+``released`` with pop-up tasks. A task not yet released is invisible: its whole block is zero. Under
+``consensus="acbba"`` the own feature ``passed`` marks an agent whose builder is not ready (it may only pass).
 """
 
 from __future__ import annotations
@@ -42,6 +47,12 @@ TASK_FEATURES = (
 # only on a faulty network (lost or delayed messages, failing agents), where silence carries information
 FAULT_FEATURES = (
     "member_silence",     # rounds since i last heard from or about its quietest fellow member / silence_timeout, ≤ 1
+)
+
+
+# only with pop-up tasks (popup_tasks > 0), whose release carries information
+POPUP_FEATURES = (
+    "released",           # the task is known (pop-up tasks are invisible before their release, Johnson §4.1.3)
 )
 
 
@@ -136,13 +147,16 @@ class ObservationBuilder:
     def __init__(self, protocol: Protocol, max_agents_per_task: int, max_rounds: int) -> None:
         """``max_agents_per_task`` and ``max_rounds`` bound every instance the env can draw (for the space)."""
         s = protocol.scenario
-        names = TASK_FEATURES + (FAULT_FEATURES if protocol.cfg.faulty else ())
+        names = (TASK_FEATURES + (FAULT_FEATURES if protocol.cfg.faulty else ())
+                 + (POPUP_FEATURES if protocol.cfg.popup_tasks else ()))
         self.layout = ObservationLayout(s.n_tasks, len(s.equipment_names), names)
         self.low, self.high = self.layout.bounds(max_agents_per_task, max_rounds, s.n_agents)
         self.scales = Scales.of(s)
         self._buffer = self._static_features(protocol)
         self._columns = {name: c for c, name in enumerate(self.layout.task_names)}
         self._tasks = self._buffer[:, self.layout.own_size:].reshape(s.n_agents, s.n_tasks, self.layout.task_size)
+        # with pop-up tasks a hidden task's block is zeroed, its fixed columns too: kept to restore on release
+        self._static_tasks = self._tasks.copy() if protocol.cfg.popup_tasks else None
 
     def space(self, dtype: np.dtype) -> spaces.Box:
         return spaces.Box(self.low.astype(dtype), self.high.astype(dtype), dtype=dtype)
@@ -172,6 +186,8 @@ class ObservationBuilder:
         unit = self.scales.reward_unit
         col = self._columns.__getitem__
         f = self._tasks
+        if self._static_tasks is not None:
+            np.copyto(f, self._static_tasks)
         f[:, :, col("gain")] = view.gain / unit
         f[:, :, col("can_bid")] = view.can_bid
         f[:, :, col("outbid")] = view.outbid
@@ -191,6 +207,9 @@ class ObservationBuilder:
             np.fill_diagonal(silence, 0.0)
             members = kn.bids > 0                                                               # (N, N, M)
             f[:, :, col("member_silence")] = np.minimum(np.where(members, silence[:, :, None], 0.0).max(axis=1), 1.0)
+        if "released" in self.layout.task_names:                # a task not yet released: its whole block is zero
+            f[:, :, col("released")] = protocol.released
+            f[:, ~protocol.released, :] = 0.0
         own = self._buffer
         own[:, 4] = [len(b) / s.n_tasks for b in kn.bundles]
         own[:, 5] = min(protocol.round / protocol.max_rounds, 1.0)
@@ -214,13 +233,14 @@ def state_vector(protocol: Protocol) -> np.ndarray:
     s = protocol.scenario
     scales = Scales.of(s)
     window_start, window_end = scales.window(s)
+    known = protocol.released                   # a pop-up task is invisible before its release
     parts = [
         (s.agent_pos / scales.arena).ravel(),
         s.agent_equipment.astype(float).ravel(),
-        (s.task_pos / scales.arena).ravel(),
-        window_start,
-        window_end,
-        s.task_agents / s.n_agents,
+        (s.task_pos / scales.arena * known[:, None]).ravel(),
+        window_start * known,
+        window_end * known,
+        s.task_agents / s.n_agents * known,
         (protocol.knowledge.own_bids() / scales.reward_unit).ravel(),
         [min(protocol.round / protocol.max_rounds, 1.0)],
     ]

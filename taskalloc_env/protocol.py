@@ -8,6 +8,9 @@ phase (thesis §3.2.3 and §5.2.2):
     quit timers (Alg 9 l. 4–5); convergence: no table or bundle changed for D + 1 consecutive rounds (and no quit
     timer still running) -- our stopping rule: the thesis gives none for detecting convergence (docs/decisions.md).
 
+Pop-up tasks (``releases``, any consensus mode): a task is invisible, and cannot be bid on, before its release
+round; a release counts as a change, and the run has not converged while a release is still to come.
+
 Task quitting is part of the protocol when ``task_quitting`` is on (thesis §5.2.2, Alg 9): agent i may quit j
 only if L_j > 1, i is a member, it never quit j (Q_i[j] = 0), the group is incomplete in its view and the
 group-synchronised timer has run out (T − H_i[j] > δ, ``delta``). Which bids and quits to make is the policy's
@@ -24,11 +27,12 @@ import numpy as np
 from taskalloc_env.allocation import Allocation, Counters
 from taskalloc_env.bidding import BidView, refresh_rows
 from taskalloc_env.cbba_table import NONE
-from taskalloc_env.config import TaskAllocConfig, round_bound
+from taskalloc_env.config import TaskAllocConfig, episode_bound
 from taskalloc_env.consensus import Snapshot, Traffic, exchange, snapshot
 from taskalloc_env.errors import ConfigError
 from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.network import CommGraph, dropout_schedule, make_network
+from taskalloc_env.releases import release_ticks
 from taskalloc_env.scenario import Scenario
 from taskalloc_env.scoring import PathTable, Schedule, ScoringModel, TeamScore, team_score
 
@@ -76,20 +80,21 @@ class Protocol:
     """All agents' tables plus the rules that change them."""
 
     def __init__(self, scenario: Scenario, cfg: TaskAllocConfig, rng: np.random.Generator | None = None) -> None:
-        """``rng`` drives the network's faults and random drop-outs (the env hands in one spawned from its seeded
-        generator); without faults nothing is drawn from it."""
+        """``rng`` drives Poisson pop-up arrivals, the network's faults and random drop-outs (the env hands in one
+        spawned from its seeded generator); when the config draws nothing (``stochastic``) nothing is drawn from it."""
         self.scenario = scenario
         self.cfg = cfg
         self.rng = rng if rng is not None else np.random.default_rng(0)
-        self.model = ScoringModel.from_config(scenario, cfg)
+        self.release_tick = release_ticks(cfg, scenario.n_tasks, self.rng)
+        self.model = ScoringModel.from_config(scenario, cfg, self.release_tick)
         self.graph = CommGraph(scenario.agent_pos, cfg.comm_range, cfg.edge_rule)
         self.equipment = self.model.equipment
         self.equipment_match = scenario.eligible()
         self.fillable = np.ones(scenario.n_tasks, dtype=bool)
         self.fillable[list(scenario.infeasible_tasks())] = False
         self.max_bundle = cfg.max_bundle or scenario.n_tasks
-        self.max_rounds = cfg.max_rounds or round_bound(scenario.n_tasks, scenario.n_agents,
-                                                        int(scenario.task_agents.max()), self.graph.diameter)
+        self.max_rounds = episode_bound(cfg, scenario.n_tasks, scenario.n_agents, int(scenario.task_agents.max()),
+                                        self.graph.diameter)
         self.silence_timeout = cfg.silence_timeout or 2 * (self.graph.diameter + 1)
         self.reset()
 
@@ -98,6 +103,7 @@ class Protocol:
         self.knowledge = LocalKnowledge.empty(s.n_agents, s.n_tasks, s.task_agents == 1,
                                               know_everyone=not self.cfg.require_known_capacity)
         self.round = 0
+        self.released = self.release_tick <= 0
         self.counters = Counters()
         self.network = make_network(self.graph, self.cfg, self.rng)
         self.alive = np.ones(s.n_agents, dtype=bool)
@@ -159,7 +165,7 @@ class Protocol:
                                       self.equipment, self.equipment_match, self._gain, self._slot,
                                       prereq_mode=self.cfg.prereq_mode,
                                       require_known_capacity=self.cfg.require_known_capacity,
-                                      max_bundle=self.max_bundle, fillable=self.fillable,
+                                      max_bundle=self.max_bundle, fillable=self.fillable & self.released,
                                       bid_warping=self.cfg.bid_warping, outbid_ties=self.cfg.outbid_ties)
             self._stale_rows.clear()
         return self._view
@@ -224,6 +230,8 @@ class Protocol:
             reasons.append("the task is already in its bundle")
         if not v.equipment_match[agent, task]:
             reasons.append("its equipment does not match te_j")
+        if not self.released[task]:
+            reasons.append("the task has not been released yet (a pop-up task)")
         if not self.fillable[task]:
             reasons.append("no team of this scenario can complete it (too few capable agents)")
         if not v.prereqs_met[agent, task]:
@@ -256,6 +264,7 @@ class Protocol:
         kn = self.knowledge
         self.round += 1
         self._fail_agents(self.dropouts.get(self.round, ()))
+        appeared = self._release_tasks()
         before = kn.bids.copy()
         own_before = kn.own_bids() > 0
         snap = snapshot(kn, self.round)
@@ -285,15 +294,32 @@ class Protocol:
         c.messages_lost += sent.lost
         c.messages_delayed += sent.delayed
         c.data_items_sent += sent.data_items
-        changed = not np.array_equal(kn.bids, self._last_bids) or kn.bundles != self._last_bundles
+        changed = appeared or not np.array_equal(kn.bids, self._last_bids) or kn.bundles != self._last_bundles
         if changed:                         # the state from here on is final if nothing changes again
             c.rounds_to_agreement, c.messages_to_agreement = self.round, c.messages
         self._last_bids = kn.bids.copy()
         self._last_bundles = [list(b) for b in kn.bundles]
         self.stable_rounds = 0 if changed or self._quit_pending(counts) else self.stable_rounds + 1
-        self.converged = self.stable_rounds >= self.live_graph.diameter + 1 and self._settled()
+        self.converged = (self.stable_rounds >= self.live_graph.diameter + 1 and self._settled()
+                          and bool(self.released.all()))
         self._touch()
         return traffic
+
+    @property
+    def globally_converged(self) -> bool:
+        """The synchronous stop is global (no table changed for D + 1 rounds); see ``AsyncProtocol`` for local."""
+        return self.converged
+
+    @property
+    def locally_converged(self) -> bool:
+        return self.converged
+
+    def _release_tasks(self) -> bool:
+        """Pop-up tasks due this round become visible to every agent (Johnson §4.1.1: task creation "enters through
+        this channel", the listener; our choice: all agents learn of it at once). Returns whether any appeared."""
+        due = ~self.released & (self.release_tick <= self.round)
+        self.released |= due
+        return bool(due.any())
 
     def _settled(self) -> bool:
         """Every live agent has heard each live neighbour since the last change, no older message is still
@@ -343,7 +369,7 @@ class Protocol:
                 kn.release(i, lost, self.cfg.release_order)
                 self._dirty.add(i)
 
-    def _reset_quit_timers(self, before: np.ndarray, counts: np.ndarray) -> None:
+    def _reset_quit_timers(self, before: np.ndarray, counts: np.ndarray | None = None) -> None:
         """H_i[j] = T when column j of an incomplete held group changed (Alg 9 lines 4–5, ``reset_on``); ``counts``
         are the tables' member counts after the exchange."""
         kn = self.knowledge
@@ -363,7 +389,8 @@ class Protocol:
         """The allocation as it stands: flown paths with start times, groups, validity, score, the run's figures."""
         return Allocation.from_paths(self.model, self.flown_paths, self.cfg.conflict_policy, schedules=self.schedules,
                                      counters=dataclasses.replace(self.counters), converged=self.converged,
-                                     agreement=self.agreement())
+                                     agreement=self.agreement(), globally_converged=self.globally_converged,
+                                     locally_converged=self.locally_converged)
 
     # -- agreement -------------------------------------------------------------------------------------------------
     def agreement(self) -> bool:

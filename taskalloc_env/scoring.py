@@ -13,7 +13,9 @@ c̄_j) is Johnson's Δτ = max(0, τ − τ_start) of §3.4.1. The two ``distanc
 (see docs/decisions.md). e_j = max(start_j, ready_j) where ready_j is the prerequisite rule of ``prereq_timing``
 (our choice: thesis §3.1.3 says prerequisites "must be completed before" j but gives no timing formula):
 ``conservative`` ready_j = max_m (end_m + dur_m), ``earliest`` max_m (start_m + dur_m), ``none`` −∞. A task
-whose e_j is not before end_j can never be started.
+whose e_j is not before end_j can never be started. A pop-up task (``releases``) cannot start before it is
+released either: e_j ≥ its release tick × ``mission_time_per_tick`` (our rule; Johnson §4.1.3 gives no mission
+clock), so scoring counts only what is feasible after release.
 
 Marginal gain (3.11): c_ij = max_n S(p ⊕_n j) − S(p) over feasible insertions, 0 if none. ``marginal_gain``:
 ``rescore`` (default, the thesis's (3.11): later tasks are re-timed, their rewards and feasibility re-checked) or
@@ -60,8 +62,9 @@ class ScoringModel:
     def __init__(self, scenario: Scenario, *, distance_cost: str = TaskAllocConfig.distance_cost,
                  prereq_timing: str = TaskAllocConfig.prereq_timing, reward_split: str = TaskAllocConfig.reward_split,
                  marginal_gain: str = TaskAllocConfig.marginal_gain,
-                 reward_time: str = TaskAllocConfig.reward_time) -> None:
-        """Scoring options default to the config's defaults (``TaskAllocConfig``), their one home."""
+                 reward_time: str = TaskAllocConfig.reward_time, release: np.ndarray | None = None) -> None:
+        """Scoring options default to the config's defaults (``TaskAllocConfig``), their one home. ``release`` (M,)
+        is the mission time at which each task becomes known (None: all at time 0)."""
         self.scenario = scenario
         self.distance_cost = distance_cost
         self.marginal_gain = marginal_gain
@@ -75,6 +78,8 @@ class ScoringModel:
         self.pay = s.task_reward / s.task_agents if reward_split == "total" else s.task_reward.astype(float)
         self.ready = self._prerequisite_ready(prereq_timing)
         self.earliest = np.maximum(s.task_start, self.ready)
+        if release is not None:
+            self.earliest = np.maximum(self.earliest, release)
         self.deadline = s.task_end
         self.doable = self.earliest < self.deadline
         self.equipment = Equipment(s.agent_equipment, s.task_equipment)
@@ -91,10 +96,15 @@ class ScoringModel:
         return np.where(s.task_prereqs, done[None, :], -np.inf).max(axis=1)
 
     @classmethod
-    def from_config(cls, scenario: Scenario, cfg: TaskAllocConfig) -> ScoringModel:
-        """The scoring model of ``scenario`` under the scoring options of ``cfg`` (the one place it is built)."""
+    def from_config(cls, scenario: Scenario, cfg: TaskAllocConfig, release: np.ndarray | None = None) -> ScoringModel:
+        """The scoring model of ``scenario`` under the scoring options of ``cfg`` (the one place it is built);
+        ``release`` (M,) the tick each task is released, converted by ``mission_time_per_tick``."""
+        mission = None
+        if release is not None and cfg.mission_time_per_tick and release.any():
+            mission = np.where(release > 0, release * cfg.mission_time_per_tick, -np.inf)
         return cls(scenario, distance_cost=cfg.distance_cost, prereq_timing=cfg.prereq_timing,
-                   reward_split=cfg.reward_split, marginal_gain=cfg.marginal_gain, reward_time=cfg.reward_time)
+                   reward_split=cfg.reward_split, marginal_gain=cfg.marginal_gain, reward_time=cfg.reward_time,
+                   release=mission)
 
     # -- paths and marginal gains, batched over agents ---------------------------------------------------------
     def schedule(self, agent: int, path: Sequence[int]) -> Schedule:

@@ -45,6 +45,12 @@ CONFIGS = {
     "task_quitting": {"n_agents": 4, "n_tasks": 5, "agents_per_task": 3, "task_quitting": True},
     # a task needing more agents than exist is infeasible, which is reported, not an error
     "infeasible_groups": {"n_agents": 2, "n_tasks": 3, "agents_per_task": [1, 3]},
+    # pop-up tasks in the synchronous protocol, and the asynchronous protocol (one step = one tick) with pop-ups
+    "sync_popups": {"n_agents": 3, "n_tasks": 5, "agents_per_task": [1, 2], "popup_tasks": 2, "popup_period": 3},
+    "acbba": {"n_agents": 3, "n_tasks": 5, "agents_per_task": [1, 2], "consensus": "acbba"},
+    "acbba_popups": {"n_agents": 4, "n_tasks": 6, "agents_per_task": [1, 2], "consensus": "acbba", "popup_tasks": 3,
+                     "popup_period": 8, "popup_arrivals": "poisson", "message_loss": 0.1, "max_delay": 1,
+                     "task_quitting": True},
 }
 CONFIG_IDS = list(CONFIGS)
 
@@ -95,6 +101,8 @@ def _line_scenario():
     pytest.param({"scenario": "default"}, id="default"),
     pytest.param({"scenario": _line_scenario(), "comm_range": 1.0}, id="line"),
     pytest.param({"scenario": _line_scenario(), "comm_range": 1.0, "consensus": "every_step"}, id="line-every-step"),
+    pytest.param({"scenario": _line_scenario(), "comm_range": 1.0, "consensus": "acbba", "popup_tasks": 2},
+                 id="line-acbba-popups"),
 ])
 def test_max_cycles(kwargs):
     module = types.SimpleNamespace(

@@ -25,11 +25,12 @@ def test_direct_solve_equals_the_episode_on_the_default_scenario(name):
 
 @pytest.mark.parametrize("sample", range(3))
 def test_direct_solve_equals_the_episode_across_options(sample):
-    rng = np.random.default_rng(sample)
+    rng, extra = np.random.default_rng(sample), np.random.default_rng([sample, 2])
     checked = 0
     while checked < 25:
-        kw = draw_config(rng)
-        if resolve_config("default", **kw).faulty:
+        kw = draw_config(rng, extra)        # deterministic pop-up tasks (periodic or listed) included
+        cfg = resolve_config("default", **kw)
+        if cfg.stochastic or cfg.asynchronous:
             continue
         name = POLICIES[checked % len(POLICIES)]
         policy = make_policy(name)
@@ -45,5 +46,7 @@ def test_direct_solve_refuses_what_it_cannot_reproduce():
     env.reset(seed=0)
     with pytest.raises(ValueError, match="perfect links"):
         solve(env.scenario, cfg, "cbga")
+    with pytest.raises(ValueError, match="asynchronous consensus"):
+        solve(env.scenario, resolve_config("train_small", agents_per_task=1, consensus="acbba"), "cbba")
     with pytest.raises(ValueError, match="scripted consensus"):
         solve(env.scenario, resolve_config("train_small"), "random")

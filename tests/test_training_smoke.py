@@ -80,3 +80,20 @@ def test_behaviour_cloning_then_ppo_and_a_mixed_team(tmp_path):
     # a second run into the same folder would replace the model: refused unless asked
     with pytest.raises(ConfigError, match="--overwrite"):
         train.main(["--name", "bc", "--out-dir", str(tmp_path), "--total-steps", "0"])
+
+
+def test_training_runs_in_the_asynchronous_mode_with_popup_tasks(tmp_path):
+    """The existing training command in the asynchronous mode (``consensus: acbba``) with pop-up tasks: it trains,
+    saves a model whose observations carry the pop-up feature, and the model plays an asynchronous episode."""
+    overrides = "{consensus: acbba, popup_tasks: 2, popup_period: 10}"
+    summary = train.main(["--name", "async", "--out-dir", str(tmp_path), "--log-dir", str(tmp_path / "logs"),
+                          "--total-steps", "1024", "--eval-freq", "512", "--env-overrides", overrides,
+                          "--n-envs", "4", "--n-steps", "64", "--batch-size", "128", "--n-epochs", "2",
+                          "--eval-episodes", "4", "--progress-bar", "false", "--tensorboard", "false"])
+    assert summary["ppo"]["steps"] >= 1024 and summary["validation"]["score"] > 0
+    policy = LearnedPolicy.load(tmp_path / "model.json")
+    assert policy.env_overrides["consensus"] == "acbba" and policy.env_overrides["popup_tasks"] == 2
+    env = TaskAllocEnv("train_small", **policy.env_overrides)
+    assert "released" in env.observation_layout.task_names
+    allocation = rollout(env, policy, seed=VALIDATION_SEED_START)
+    assert allocation.counters.broadcasts > 0 and allocation.counters.rounds > 0

@@ -1,0 +1,320 @@
+"""ACBBA in the environment (``consensus="acbba"``, Johnson §4.1): convergence, agreement with synchronous CBBA,
+timestamps, the listener/builder split, release of outbid tasks, pop-up tasks, local convergence, multi-agent tasks
+asynchronously, faults, and determinism across processes."""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+import pytest
+from helpers import agent, build, task
+
+from evaluation import acbba_check
+from policies import make_policy, rollout
+from taskalloc_env import TaskAllocEnv
+from taskalloc_env.async_consensus import compose
+from taskalloc_env.async_protocol import AsyncProtocol
+from taskalloc_env.cbba_table import NONE
+from taskalloc_env.scenario import scenario_config
+from taskalloc_env.stamps import NEVER, stamp, tick_of
+
+DMG = {"distance_cost": "from_start", "marginal_gain": "frozen", "agents_per_task": 1}
+
+
+# -- ACBBA against synchronous CBBA (Johnson §1.2: "the task space convergence properties of nominal CBBA") -----------
+def test_acbba_converges_agrees_and_matches_cbba_on_random_dmg_scenarios():
+    """A smaller run of ``python -m evaluation.acbba_check`` (1000 scenarios, docs/results.md): every ACBBA run goes
+    quiet conflict-free in agreement, and its allocation equals CBBA's or the difference is stale information."""
+    verdicts = acbba_check.run_checks(60, {}, jobs=1)
+    text, ok = acbba_check.report(verdicts)
+    assert ok, text
+    assert sum(v.equal is True for v in verdicts) >= 55, text
+
+
+@pytest.mark.slow
+def test_acbba_check_on_a_thousand_scenarios():
+    text, ok = acbba_check.report(acbba_check.run_checks(1000, {}, jobs=2))
+    assert ok, text
+
+
+@pytest.mark.parametrize("faults", [{"message_loss": 0.2, "max_delay": 3}, {"message_loss": 0.2},
+                                    {"loss_model": "gilbert_elliott", "message_loss": 0.02, "burst_enter": 0.1,
+                                     "burst_leave": 0.4}, {"max_delay": 5}],
+                         ids=["loss+delay", "loss", "bursts", "delay"])
+def test_under_loss_and_delay_acbba_still_converges_conflict_free(faults):
+    text, ok = acbba_check.report(acbba_check.run_checks(30, faults, jobs=1))
+    assert ok, text
+
+
+# -- timestamps, buffers, rebroadcasts ---------------------------------------------------------------------------------
+def _drive(env: TaskAllocEnv, policy: str, seed: int, watch=None):
+    p = make_policy(policy)
+    obs, infos = env.reset(seed=seed)
+    p.start(env, seed)
+    while env.agents:
+        actions = p.act({a: obs[a] for a in env.agents}, infos)
+        ready = env.protocol.ready.copy()
+        tick = env.protocol.round
+        if watch:
+            watch("before", env, actions, ready, tick)
+        obs, _, _, _, infos = env.step(actions)
+        if watch:
+            watch("after", env, actions, ready, tick)
+    return env.evaluate()
+
+
+def test_bids_carry_the_tick_they_were_made_and_only_completed_builds_broadcast():
+    """Johnson §4.1.1: "the current time is sampled and recorded as the bid time" (line 812); outgoing buffers are
+    flushed "triggered by the completion of the BundleBuilder thread" (line 763): every broadcast comes from a ready
+    agent that passed in that tick, and agents that are not ready may only pass."""
+    env = TaskAllocEnv(n_agents=6, n_tasks=12, consensus="acbba", **DMG)
+    passed: list[tuple[int, int]] = []
+    stamped: list[bool] = []
+
+    def watch(when, env, actions, ready, tick):
+        p = env.protocol
+        if when == "before":
+            for a, action in actions.items():
+                assert ready[env.agent_index[a]] or action == 0
+            advance = p.advance
+
+            def checked():                 # the decisions are applied, the tick has not moved on yet
+                for a, action in actions.items():
+                    if action:
+                        i = env.agent_index[a]
+                        stamped.append(p.times.task[i, action - 1] == stamp(tick, i))
+                p.advance = advance
+                advance()
+            p.advance = checked
+            return
+        passed.extend((tick, env.agent_index[a]) for a, action in actions.items()
+                      if not action and ready[env.agent_index[a]])
+
+    alloc = _drive(env, "acbba", seed=3, watch=watch)
+    assert alloc.converged and alloc.agreement and not alloc.conflicts
+    assert stamped and all(stamped)
+    log = env.protocol.broadcast_log
+    assert log and all((tick, sender) in set(passed) for tick, sender, _ in log)
+    assert alloc.counters.broadcasts == len(log)
+
+
+def test_quiet_means_every_agent_holds_the_same_record_and_time():
+    """With unique (tick, bump, stamper) stamps, a quiet network holds identical (z, y, t) everywhere (note §8.3)."""
+    for seed in range(8):
+        env = TaskAllocEnv(n_agents=5, n_tasks=10, consensus="acbba", **DMG)
+        alloc = rollout(env, make_policy("acbba"), seed=seed)
+        p = env.protocol
+        assert alloc.globally_converged and p.counters.quiet_tick == p.round
+        assert (p.times.task == p.times.task[0]).all() and (p.knowledge.winner == p.knowledge.winner[0]).all()
+        for i, bundle in enumerate(p.knowledge.bundles):
+            assert all(p.knowledge.winner[0, j] == i for j in bundle)
+
+
+def test_an_outbid_task_is_released_with_the_tasks_after_it_as_empty_bids_with_the_current_time():
+    """Module 1 (line 773): an outbid agent releases the task and every later one; the later ones it held go out as
+    Table 4.1's rebroadcast* form, an empty bid with the current time; the lost task keeps the new winner's record."""
+    s = build([agent(0), agent(5)], [task(1), task(2), task(9)])
+    cfg = scenario_config(s, consensus="acbba", build_ticks=(0, 0), message_ticks=(0.0, 0.0), **DMG)
+    p = AsyncProtocol(s, cfg)
+    assert p.ready.all()
+    p.bid(0, 0)
+    p.bid(0, 1)
+    p.finish(0)
+    p.finish(1)
+    p.advance()                                        # tick 1: agent 1 hears agent 0's two bids
+    assert p.knowledge.winner[1, 0] == 0
+    rival = AsyncProtocol(s, cfg)                      # agent 1's higher bid on task 0, made at tick 1
+    rival.round = 1
+    rival.knowledge.set_bid(1, 1, 0, 1000.0)
+    rival.times.task[1, 0] = stamp(1, 1)
+    message = compose(rival.knowledge, rival.times, 1, 1, np.array([True, False, False]))
+    p.payloads[(1, 1)] = message
+    p.network.send(1, np.array([1]), np.array([0, message.data_items]))
+    p.advance()                                        # tick 2: agent 0 is outbid on task 0, builds, releases
+    kn = p.knowledge
+    assert p.ready[0] and kn.bundles[0] == []
+    assert (kn.winner[0, 0], p.times.task[0, 0]) == (1, stamp(1, 1))
+    assert (kn.winner[0, 1], p.times.task[0, 1]) == (NONE, stamp(2, 0))
+    assert p.outgoing[0, :2].all()
+    p.finish(0)
+    sent = p.payloads[(0, 2)]
+    assert (sent.winner[1], sent.bid[1], tick_of(sent.time[1])) == (NONE, 0.0, 2)
+
+
+# -- convergence: global and local (Johnson §4.1.3) --------------------------------------------------------------------
+def test_evaluate_reports_global_and_local_convergence_and_their_times():
+    env = TaskAllocEnv(n_agents=5, n_tasks=10, consensus="acbba", separation_time=10, **DMG)
+    alloc = rollout(env, make_policy("acbba"), seed=2)
+    c = alloc.counters
+    assert alloc.converged and alloc.globally_converged and alloc.locally_converged
+    assert 0 < c.quiet_tick == c.rounds and c.local_tick > c.quiet_tick - 1
+    assert c.separation_ticks <= c.quiet_tick and c.broadcasts > 0
+    summary = alloc.summary()
+    assert {"quiet_tick", "local_tick", "separation_ticks", "globally_converged", "locally_converged"} <= set(summary)
+    local = rollout(TaskAllocEnv(n_agents=5, n_tasks=10, consensus="acbba", separation_time=10,
+                                 termination="local", **DMG), make_policy("acbba"), seed=2)
+    assert local.converged and local.locally_converged and local.counters.local_tick == local.counters.rounds
+
+
+# -- pop-up tasks (Johnson §4.1.3, Figs 4-3 and 4-4) -------------------------------------------------------------------
+@pytest.mark.parametrize("consensus", ["sync", "every_step", "acbba"])
+def test_popup_tasks_are_invisible_until_released(consensus):
+    env = TaskAllocEnv(n_agents=3, n_tasks=6, popup_tasks=2, popup_times=[3, 6], consensus=consensus, **DMG)
+    obs, infos = env.reset(seed=1)
+    layout = env.observation_layout
+    p = make_policy("acbba" if consensus == "acbba" else "cbba")
+    p.start(env, 1)
+    seen = set()
+    while env.agents:
+        released = env.protocol.released.copy()
+        for o in obs.values():
+            _, tasks = layout.split(o["observation"])
+            assert not tasks[~released].any() and (tasks[released, layout.task_column("released")] == 1).all()
+            assert not o["action_mask"][1:][np.r_[~released, ~released]].any()
+        assert (env.protocol.release_tick[released] <= env.protocol.round).all()
+        seen |= set(np.flatnonzero(released).tolist())
+        obs, _, _, _, infos = env.step(p.act({a: obs[a] for a in env.agents}, infos))
+    assert seen == set(range(6)) and env.evaluate().converged
+
+
+def test_release_times_bound_the_schedule_when_ticks_map_to_mission_time():
+    """``mission_time_per_tick``: a pop-up released at tick r cannot start before r × that (scoring counts only what is
+    feasible after release)."""
+    env = TaskAllocEnv(n_agents=3, n_tasks=6, popup_tasks=3, popup_period=20, mission_time_per_tick=1.0,
+                       consensus="acbba", **DMG)
+    alloc = rollout(env, make_policy("acbba"), seed=4)
+    release = env.protocol.release_tick
+    for path, starts in zip(alloc.paths, alloc.start_times):
+        for j, start in zip(path, starts):
+            assert start >= release[j] * 1.0 - 1e-9
+
+
+def test_poisson_arrivals_are_seeded_and_within_the_horizon():
+    ticks = []
+    for seed in (0, 0, 1):
+        env = TaskAllocEnv(n_agents=3, n_tasks=8, popup_tasks=5, popup_period=30, popup_arrivals="poisson",
+                           consensus="acbba", **DMG)
+        env.reset(seed=seed)
+        ticks.append(env.protocol.release_tick.tolist())
+    assert ticks[0] == ticks[1] != ticks[2]
+    assert all(0 < t <= 150 for t in ticks[0][3:]) and ticks[0][:3] == [0, 0, 0]
+
+
+def test_slow_popups_are_assigned_within_a_bounded_time_and_the_profile_is_burst_then_quiet():
+    """Arrivals slower than convergence (the 0.2 s analogue): each released task that some agent can do holds a
+    winner in every table within BOUND ticks, and every burst of broadcasts ends before the next release."""
+    period, bound = 150, 60
+    for seed in range(4):
+        env = TaskAllocEnv(n_agents=6, n_tasks=14, popup_tasks=6, popup_period=period, consensus="acbba",
+                           termination="global", **DMG)
+        checks = {}
+
+        def watch(when, env, actions, ready, tick, checks=checks):
+            p = env.protocol
+            if when != "after":
+                return
+            for j in np.flatnonzero((p.release_tick > 0) & (p.round - p.release_tick == bound)):
+                held = (p.knowledge.winner[:, j] != NONE).all()
+                nobody_can = not (p.view().gain[:, j] > 0).any()
+                checks[int(j)] = held or nobody_can
+
+        alloc = _drive(env, "acbba", seed=seed, watch=watch)
+        assert alloc.converged and not alloc.conflicts
+        p = env.protocol
+        for j in np.flatnonzero(p.release_tick > 0):       # released less than BOUND ticks before the end
+            checks.setdefault(int(j), bool((p.knowledge.winner[:, j] != NONE).all()
+                                           or not (p.view().gain[:, j] > 0).any()))
+        assert len(checks) == 6 and all(checks.values()), checks
+        releases = sorted(set(env.protocol.release_tick.tolist()))
+        ticks = np.array([t for t, _, _ in env.protocol.broadcast_log])
+        for start, nxt in itertools.pairwise(releases):
+            burst = ticks[(ticks >= start) & (ticks < nxt)]
+            assert burst.size and burst.max() < nxt - 1 and burst.max() - start < bound
+
+
+# -- multi-agent tasks asynchronously (CBGA's merge per message; our extension) ----------------------------------------
+FAULTS = {
+    "perfect": {},
+    "loss+delay": {"message_loss": 0.2, "max_delay": 3},
+    "bursts": {"loss_model": "gilbert_elliott", "message_loss": 0.02, "burst_enter": 0.1, "burst_leave": 0.4},
+    "range": {"comm_range": 2.5},
+    "dropouts": {"dropouts": 2, "dropout_rounds": [1, 20]},
+    "popups": {"popup_tasks": 3, "popup_period": 40},
+}
+
+
+@pytest.mark.parametrize("fault", sorted(FAULTS))
+@pytest.mark.parametrize("policy", ["cbga", "cbgabi", "acbba"])
+def test_asynchronous_episodes_converge_agree_and_are_conflict_free(fault, policy):
+    p = make_policy(policy)
+    extra = {"agents_per_task": 1} if policy == "acbba" else {}
+    env = TaskAllocEnv("train_small", **{"consensus": "acbba", **FAULTS[fault], **extra, **p.env_overrides})
+    for seed in range(6):
+        allocation = rollout(env, p, seed=seed)
+        live = env.protocol.alive
+        connected = len(set(env.protocol.live_graph.component[live].tolist())) == 1
+        assert allocation.converged, f"seed {seed}: hit the tick bound"
+        assert allocation.agreement, f"seed {seed}"
+        assert not allocation.conflicts or not connected, f"seed {seed}: {allocation.conflicts}"
+
+
+def test_a_failed_agent_is_announced_and_its_tasks_are_reassigned():
+    s = build([agent(0), agent(1)], [task(1, start=10, end=100), task(0, 1, start=10, end=100)])
+    env = TaskAllocEnv(scenario=s, consensus="acbba", dropout_schedule=[[1, 12]], silence_timeout=5,
+                       build_ticks=(0, 0), invalid_action="raise")
+    alloc = rollout(env, make_policy("acbba"), seed=0)
+    assert alloc.converged and alloc.paths[1] == () and set(alloc.paths[0]) == {0, 1}
+    assert alloc.counters.dropped_agents == 1 and alloc.counters.silent_releases >= 1
+
+
+def test_listener_processing_time_delays_messages():
+    """Per-agent processing times: a listener slower than a tick per message takes several ticks for a burst."""
+    env = TaskAllocEnv(n_agents=4, n_tasks=8, consensus="acbba", message_ticks=(1.0, 1.0), **DMG)
+    env.reset(seed=0)
+    assert (env.protocol.message_ticks == 1.0).all()
+    fast = rollout(TaskAllocEnv(n_agents=4, n_tasks=8, consensus="acbba", message_ticks=(0.0, 0.0), **DMG),
+                   make_policy("acbba"), seed=0)
+    slow = rollout(env, make_policy("acbba"), seed=0)
+    assert slow.converged and slow.counters.quiet_tick > fast.counters.quiet_tick
+
+
+# -- determinism -------------------------------------------------------------------------------------------------------
+ASYNC_CASES = [
+    ("acbba", {"agents_per_task": 1, "popup_tasks": 3, "popup_period": 20, "popup_arrivals": "poisson"}),
+    ("cbgabi", {"message_loss": 0.2, "max_delay": 2}),
+    ("random", {"popup_tasks": 2, "popup_period": 10, "build_ticks": [0, 4], "message_ticks": [0.0, 0.7]}),
+]
+
+
+def async_digest(args: tuple[str, dict, int]) -> str:
+    policy_name, extra, seed = args
+    p = make_policy(policy_name)
+    env = TaskAllocEnv("train_small", **{"consensus": "acbba", **extra, **p.env_overrides})
+    obs, infos = env.reset(seed=seed)
+    p.start(env, seed)
+    digest = hashlib.sha256()
+    while env.agents:
+        actions = p.act({a: obs[a] for a in env.agents}, infos)
+        obs, rewards, *_, infos = env.step(actions)
+        digest.update(json.dumps([actions, rewards, infos], sort_keys=True, default=str).encode())
+        for o in obs.values():
+            digest.update(o["observation"].tobytes())
+    digest.update(repr(env.evaluate()).encode())
+    return digest.hexdigest()
+
+
+def test_asynchronous_episodes_replay_byte_identically_across_processes():
+    cases = [(name, extra, seed) for name, extra in ASYNC_CASES for seed in (3, 4)]
+    here = [async_digest(c) for c in cases]
+    with ProcessPoolExecutor(2) as pool:
+        there = list(pool.map(async_digest, cases))
+    assert here == there and len(set(here)) == len(here)
+
+
+def test_never_is_before_every_stamp_and_fresh_tables_hold_no_time():
+    p = AsyncProtocol(build([agent(0)], [task(1)]), scenario_config(build([agent(0)], [task(1)]), consensus="acbba"))
+    assert (p.times.task == NEVER).all() and (p.times.entry == NEVER).all() and stamp(0, 0) > NEVER
