@@ -7,12 +7,13 @@ Create it with ``pettingzoo.make("parallel", "taskalloc/TaskAlloc-v0", ...)`` (o
 Agents                 ``uav_0 … uav_{N-1}`` (N = ``n_agents``, default 10)
 Parallel API           yes (AEC through ``parallel_to_aec``)
 Action space           ``Discrete(1 + 2M)``: 0 pass, 1..M bid on task j−1, M+1..2M quit task j−M−1
-Observation space      ``Dict(observation=Box(D,) float64, action_mask=Box(0, 1, (1 + 2M,), int8))``
+Observation space      ``Dict(observation=Box(D,) float32, action_mask=Box(0, 1, (1 + 2M,), int8))`` (``dtype``)
 State space            ``Box`` of agent/task attributes, every agent's own bids and the round
 Reward                 cooperative, potential-based: every agent gets Δ team score (÷ ``reward_scale``)
 Termination            the allocation converged (no table changed for D + 1 rounds; our stopping rule; under
                        ``acbba``: the network went quiet, or every agent converged locally, Johnson §4.1.3)
-Truncation             ``max_cycles`` steps, or the round bound T_max (``max_rounds``)
+Truncation             the round bound T_max (``max_rounds``), or ``max_cycles`` steps (default: ``step_bound``,
+                       the most steps T_max rounds can take)
 =====================  ==============================================================================
 
 Each step is one decision per agent in the bundle phase of CBGA (thesis §3.2.2, Alg 5): *bid* on a task (inserted
@@ -32,8 +33,9 @@ gains a per-task ``released`` feature.
 
 Constructor arguments: ``scenario`` (a name from ``configs/scenarios``, a YAML path, a
 :class:`~taskalloc_env.config.TaskAllocConfig`, a mapping, or a fixed :class:`~taskalloc_env.scenario.Scenario`),
-``max_cycles`` (steps before truncation; None: only the round bound), ``render_mode`` (``ansi``, ``rgb_array``,
-``human``), ``invalid_action`` (``raise``: bad input raises; ``noop``: it becomes a pass, flagged in infos),
+``max_cycles`` (steps before truncation; None: ``step_bound``), ``render_mode`` (``ansi``, ``rgb_array``,
+``human``), ``invalid_action`` (``noop``, the default: an invalid action becomes a pass, flagged in infos; ``raise``:
+bad input raises ``InvalidActionError``), ``dtype`` (``float32``, the default, or ``float64`` observations and state),
 ``reward_scale`` (rewards are Δscore / reward_scale), ``render_path`` (where ``human`` saves its figure: at the end of
 every episode and on each ``render()`` call; None shows it in a window, redrawn every step), and any config field
 as a keyword override (``n_agents=10, n_tasks=20, agents_per_task=4, comm_range=None``).
@@ -102,7 +104,6 @@ class TaskAllocEnv(ParallelEnv):
             raise ConfigError(f"reward_scale must be a finite number > 0, got {reward_scale!r}")
         self.render_mode = render_mode
         self.render_path = Path(render_path) if render_path is not None else None
-        self.max_cycles = max_cycles
         self.invalid_action = invalid_action
         self.reward_scale = float(reward_scale)
         n, m = self.config.n_agents, self.config.n_tasks
@@ -126,6 +127,14 @@ class TaskAllocEnv(ParallelEnv):
             # the largest diameter any instance can have: 1 fully connected, n − 1 for agents in a line
             diameter = 1 if self.config.comm_range is None else max(1, n - 1)
             self._max_rounds = episode_bound(self.config, m, n, self._max_agents_per_task, diameter)
+        # the most steps T_max rounds can take, so the default never cuts what the round bound lets finish: a sync
+        # round ends when all have passed; before that an agent's steps are its bids (each adds a task to its
+        # bundle; only its own quits, at most one per task, each dropping at most M tasks, make room again: at most
+        # M + M² bids), its quits (at most M) and the pass, (M + 1)² in all; every_step and acbba: a round (tick)
+        # per step
+        per_round = (m + 1) ** 2 if self.config.consensus == "sync" else 1
+        self.step_bound = self._max_rounds * per_round
+        self.max_cycles = max_cycles if max_cycles is not None else self.step_bound
         builder = ObservationBuilder(probe_protocol, self._max_agents_per_task, self._max_rounds)
         self.observation_layout = builder.layout
         self._observation_space = spaces.Dict({
@@ -223,8 +232,7 @@ class TaskAllocEnv(ParallelEnv):
         self._last_score = score
         terminated = protocol.converged
         truncated = not terminated and (
-            (self.max_cycles is not None and self._steps >= self.max_cycles)
-            or protocol.round >= protocol.max_rounds)
+            self._steps >= self.max_cycles or protocol.round >= protocol.max_rounds)
         agents = list(self.agents)
         observations = self._observations()
         rewards = {a: reward for a in agents}

@@ -8,12 +8,15 @@ Random tables, bids, equipment and L_j drive both sides.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from taskalloc_env.bidding import bid_view
+from taskalloc_env import kernels
+from taskalloc_env.bidding import bid_view, refresh_rows
 from taskalloc_env.cbba_table import NONE
 from taskalloc_env.group_merge import merge
 from taskalloc_env.groups import Equipment
@@ -48,13 +51,17 @@ def tables(draw):
 
 
 @pytest.mark.filterwarnings("ignore:tasks .* are identical")     # identical tasks are drawn on purpose
+@pytest.mark.parametrize("mask", ["reference", "compiled"])
 @pytest.mark.parametrize("outbid_ties", ["higher_id", "strict"])
 @settings(max_examples=300, deadline=None)
 @given(tables(), st.data())
-def test_bid_mask_and_merge_admit_the_same_bids(outbid_ties, case, data):
+def test_bid_mask_and_merge_admit_the_same_bids(mask, outbid_ties, case, data):
     """Under ``higher_id`` the mask and the merge decide every bid alike; under ``strict`` (the bundle phase's ">")
     the mask refuses exactly the bids that would displace a member with an equal bid, which the merge's (bid, id)
-    order would admit."""
+    order would admit. The mask comes from ``bid_view`` (numpy) or from the compiled kernel the protocol runs
+    (``refresh_rows``), each against the numpy merge (the compiled merge equals it: tests/test_kernels.py)."""
+    if mask == "compiled" and not kernels.COMPILED:
+        pytest.skip("numba is not installed")
     scenario, i, table, gains = case
     n, m = table.shape
     receiver = data.draw(st.sampled_from([k for k in range(n) if k != i]))
@@ -63,9 +70,10 @@ def test_bid_mask_and_merge_admit_the_same_bids(outbid_ties, case, data):
     knowledge.bids[i] = table
     gain = np.zeros((n, m))
     gain[i] = gains
-    view = bid_view(knowledge, scenario, equipment, scenario.eligible(), gain, np.zeros((n, m), dtype=np.int64),
-                    prereq_mode="all_have_bid", require_known_capacity=False, max_bundle=m,
-                    fillable=np.ones(m, dtype=bool), bid_warping=False, outbid_ties=outbid_ties)
+    build = bid_view if mask == "reference" else functools.partial(refresh_rows, None, range(n))
+    view = build(knowledge, scenario, equipment, scenario.eligible(), gain, np.zeros((n, m), dtype=np.int64),
+                 prereq_mode="all_have_bid", require_known_capacity=False, max_bundle=m,
+                 fillable=np.ones(m, dtype=bool), bid_warping=False, outbid_ties=outbid_ties)
     # i bids on every task at once (columns are independent): its table after the bids, as Protocol.bid writes it
     after = table.copy()
     for j in range(m):
