@@ -223,6 +223,33 @@ def test_round_bound_truncates():
     assert e.protocol.round == 1 and not e.evaluate().converged
 
 
+@pytest.mark.parametrize("consensus", ["sync", "every_step"])
+def test_the_default_step_limit_never_cuts_a_round_the_bound_allows(consensus):
+    """``max_cycles`` defaults to ``step_bound`` = T_max · (M + 1)² (sync) or T_max (one round per step): no sync
+    round takes more than (M + 1)² steps, even under a random policy that quits and re-bids (``quit_block=none``
+    lets a quit task be re-bid; a quit drops what follows it, which may be bid again)."""
+    from policies import make_policy
+
+    assert TaskAllocEnv(max_cycles=7).max_cycles == 7
+    longest = 0
+    for seed in range(12):
+        e = TaskAllocEnv(n_agents=4, n_tasks=5, agents_per_task=[1, 2, 3], task_quitting=True, delta=0,
+                         quit_block="none", consensus=consensus)
+        per_round = (e.config.n_tasks + 1) ** 2 if consensus == "sync" else 1
+        assert e.max_cycles == e.step_bound == e.unwrapped._max_rounds * per_round
+        policy = make_policy("random")
+        obs, infos = e.reset(seed=seed)
+        policy.start(e, seed=seed)
+        steps, last_round = 0, 0
+        while e.agents:
+            obs, *_, infos = e.step(policy.act(obs, infos))
+            steps += 1
+            if e.protocol.round != last_round:
+                longest, steps, last_round = max(longest, steps), 0, e.protocol.round
+        assert longest <= per_round
+    assert consensus == "every_step" or longest > 3      # the random policy does use several steps per round
+
+
 # -- bad input ----------------------------------------------------------------------------------------------------
 @pytest.fixture
 def env():
