@@ -26,10 +26,14 @@ from typing import Any
 
 import torch as th
 import yaml
-from sb3_contrib import MaskablePPO
-from stable_baselines3 import PPO
-from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
-from stable_baselines3.common.utils import set_random_seed
+
+try:
+    from sb3_contrib import MaskablePPO
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+    from stable_baselines3.common.utils import set_random_seed
+except ModuleNotFoundError as missing:              # name the extra, not just the module
+    raise ModuleNotFoundError(f"training.train needs {missing.name}: pip install 'taskalloc[train]'") from missing
 
 from evaluation.episodes import evaluate, summarise
 from evaluation.seeds import DEMO_SEED_START, TEST_SEEDS, VALIDATION_SEED_START
