@@ -24,13 +24,13 @@ import dataclasses
 import sys
 from collections import Counter
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
 import yaml
 
 from evaluation.episodes import default_jobs
+from evaluation.pool import parallel_map
 from policies import make_policy, sgama
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.allocation import Allocation
@@ -105,10 +105,7 @@ def check(args: tuple[int, dict[str, Any]]) -> Verdict:
 
 def run_checks(scenarios: int, faults: dict[str, Any], jobs: int, first: int = 0) -> list[Verdict]:
     todo = [(seed, faults) for seed in range(first, first + scenarios)]
-    if jobs > 1:
-        with ProcessPoolExecutor(jobs) as pool:
-            return list(pool.map(check, todo, chunksize=8))
-    return [check(case) for case in todo]
+    return list(parallel_map(check, todo, jobs))
 
 
 def report(verdicts: Sequence[Verdict]) -> tuple[str, bool]:

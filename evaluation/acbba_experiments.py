@@ -27,7 +27,6 @@ import argparse
 import csv
 import itertools
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +34,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from evaluation.episodes import default_jobs
+from evaluation.pool import parallel_map
 from evaluation.report import markdown_table
 from policies import make_policy
 from taskalloc_env import TaskAllocEnv
@@ -85,10 +85,7 @@ def episode(args: tuple[str, dict[str, Any], int]) -> dict[str, Any]:
 
 
 def run_all(cases: list[tuple[str, dict[str, Any], int]], jobs: int) -> list[dict[str, Any]]:
-    if jobs > 1:
-        with ProcessPoolExecutor(jobs) as pool:
-            return list(pool.map(episode, cases, chunksize=2))
-    return [episode(c) for c in cases]
+    return list(parallel_map(episode, cases, jobs))
 
 
 def mean_sd(values: Sequence[float], digits: int = 0) -> str:

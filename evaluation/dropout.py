@@ -24,12 +24,12 @@ from __future__ import annotations
 import argparse
 import dataclasses
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
 
 from evaluation.episodes import default_jobs
+from evaluation.pool import parallel_map
 from evaluation.report import markdown_table
 from evaluation.stats import format_mean_sd, format_p, paired
 from policies import make_policy, rollout
@@ -123,10 +123,7 @@ def run_seed(case: tuple[str, int, int, str]) -> dict[str, Any]:
 def study(episodes: int, failure_round: int, jobs: int = 1, algorithms: Sequence[str] = tuple(ALGORITHMS),
           scenario: str = "default") -> list[dict[str, Any]]:
     todo = [(name, seed, failure_round, scenario) for name in algorithms for seed in range(episodes)]
-    if jobs > 1:
-        with ProcessPoolExecutor(jobs) as pool:
-            return list(pool.map(run_seed, todo, chunksize=4))
-    return [run_seed(c) for c in todo]
+    return list(parallel_map(run_seed, todo, jobs))
 
 
 def tables(rows: Sequence[dict[str, Any]]) -> tuple[str, str]:

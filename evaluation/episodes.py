@@ -24,17 +24,15 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
-import multiprocessing
 import os
-import sys
-from collections.abc import Iterator, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from tqdm import tqdm
 
 from evaluation.distributed import BACKENDS, ray_map
+from evaluation.pool import parallel_map
 from policies import exact, make_policy, rollout, sgama
 from policies.base import Policy
 from policies.centralised import MAX_AGENTS, MAX_TASKS
@@ -54,7 +52,6 @@ METRICS = ("score", "valid_tasks", "conflicts", "rounds", "messages", "comm_step
            "data_per_assignment", "data_per_agent_per_assignment", "conflicting_bids_per_agent", "dropped_agents",
            "connected", "fully_connected")
 SUMMARY_FIELDS = ("score", "valid_tasks", "rounds", "messages")
-MAX_CHUNK = 16
 PROTOCOL_METRICS = ("rounds", "messages", "comm_steps", "rounds_to_agreement", "comm_steps_to_agreement",
                     "invalid_actions", "informative_messages", "data_items", "quits", "messages_lost",
                     "messages_delayed", "data_received_per_agent", "data_sent_per_agent", "data_per_assignment",
@@ -211,23 +208,10 @@ def run_episodes(episodes: Sequence[Episode], jobs: int = 1, progress: bool = Tr
         raise ValueError(f"backend {backend!r} is not one of {BACKENDS}")
     rows = []
     with tqdm(total=len(episodes), desc=desc, disable=not progress, unit="ep", dynamic_ncols=True) as bar:
-        for row in (ray_map(run_episode, episodes) if backend == "ray" else _map(episodes, jobs)):
+        for row in (ray_map(run_episode, episodes) if backend == "ray" else parallel_map(run_episode, episodes, jobs)):
             rows.append(row)
             bar.update()
     return rows
-
-
-def _map(episodes: Sequence[Episode], jobs: int) -> Iterator[dict[str, Any]]:
-    if jobs <= 1 or len(episodes) < 2:
-        yield from map(run_episode, episodes)
-        return
-    # about eight chunks per worker keep the load balanced; at most MAX_CHUNK episodes travel per task
-    chunksize = max(1, min(MAX_CHUNK, len(episodes) // (8 * jobs)))
-    # forking a process whose torch thread pools are up can deadlock the children (a learned policy loaded in
-    # this process); then workers start from a clean forkserver and load their own copy
-    context = multiprocessing.get_context("forkserver" if "torch" in sys.modules else "fork")
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-        yield from pool.map(run_episode, episodes, chunksize=chunksize)
 
 
 def check_pairing(rows: Sequence[dict[str, Any]], keys: Sequence[str]) -> list[str]:

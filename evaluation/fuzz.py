@@ -33,12 +33,12 @@ import json
 import sys
 from collections import Counter
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
 
 from evaluation.episodes import default_jobs
+from evaluation.pool import parallel_map
 from policies import make_policy
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.errors import run_cli
@@ -194,11 +194,7 @@ def cases(episodes: int, seed: int) -> list[tuple[dict[str, Any], str, int]]:
 def fuzz(episodes: int, seed: int, jobs: int = 1) -> tuple[Counter, list[dict[str, Any]]]:
     """Run the fuzz; returns per-check counts (``check: passed`` / ``check: failed``) and the failing verdicts."""
     todo = cases(episodes, seed)
-    if jobs > 1:
-        with ProcessPoolExecutor(jobs) as pool:
-            verdicts = list(pool.map(run_case, todo, chunksize=8))
-    else:
-        verdicts = [run_case(c) for c in todo]
+    verdicts = list(parallel_map(run_case, todo, jobs))
     counts: Counter = Counter()
     failures = []
     for v in verdicts:

@@ -17,9 +17,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from scipy import stats
 
-from evaluation.stats import PairedComparison, format_mean_sd, format_p, paired
+from evaluation.stats import PairedComparison, ci95_half, format_mean_sd, format_p, paired
 
 METRIC_LABELS = {
     "score": "score", "valid_tasks": "valid tasks", "conflicts": "conflicts", "rounds": "rounds",
@@ -148,7 +147,7 @@ def bar_and_differences(path: Path, cells: Mapping[str, Sequence[Mapping[str, An
     for n, x in enumerate(data):
         finite = x[np.isfinite(x)]
         if finite.size:
-            ax.errorbar(n, finite.mean(), yerr=_half_ci(finite), fmt="o", capsize=5, color="tab:blue")
+            ax.errorbar(n, finite.mean(), yerr=ci95_half(finite), fmt="o", capsize=5, color="tab:blue")
     ax.set_xticks(range(len(labels)), labels, rotation=30, ha="right")
     ax.set_ylabel(f"{name} (mean, 95 % CI)")
     ax.grid(axis="y", alpha=0.3)
@@ -161,7 +160,7 @@ def bar_and_differences(path: Path, cells: Mapping[str, Sequence[Mapping[str, An
         rng = np.random.default_rng(0)
         for n, d in enumerate(diffs):
             ax.scatter(n + rng.uniform(-0.2, 0.2, d.size), d, s=8, alpha=0.35, color="tab:orange")
-            ax.errorbar(n, d.mean(), yerr=_half_ci(d), fmt="D", capsize=6, color="k", zorder=3)
+            ax.errorbar(n, d.mean(), yerr=ci95_half(d), fmt="D", capsize=6, color="k", zorder=3)
         ax.set_xticks(range(len(others)), others, rotation=30, ha="right")
         ax.set_ylabel(f"{name} − {baseline}, per seed (mean, 95 % CI)")
         ax.grid(axis="y", alpha=0.3)
@@ -170,13 +169,6 @@ def bar_and_differences(path: Path, cells: Mapping[str, Sequence[Mapping[str, An
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
-
-
-def _half_ci(x: np.ndarray) -> float:
-    """Half-width of the 95 % t-interval of the mean (0 for fewer than two values)."""
-    if x.size < 2:
-        return 0.0
-    return float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / np.sqrt(x.size))
 
 
 def sweep_plot(path: Path, xs: Sequence[Any], series: Mapping[str, Sequence[Sequence[Mapping[str, Any]]]],
@@ -192,7 +184,7 @@ def sweep_plot(path: Path, xs: Sequence[Any], series: Mapping[str, Sequence[Sequ
         stats_ = [values(c, metric) for c in cells]
         mean = np.array([np.nanmean(s) if np.isfinite(s).any() else np.nan for s in stats_])
         if share:
-            sd = np.array([_half_ci(s[np.isfinite(s)]) for s in stats_])
+            sd = np.array([ci95_half(s[np.isfinite(s)]) for s in stats_])
         else:
             sd = np.array([np.nanstd(s, ddof=1) if np.isfinite(s).sum() > 1 else 0.0 for s in stats_])
         if np.isnan(mean).all():

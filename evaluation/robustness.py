@@ -29,12 +29,12 @@ import dataclasses
 import json
 import sys
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
 
 from evaluation.episodes import default_jobs
+from evaluation.pool import parallel_map
 from evaluation.report import markdown_table
 from policies import make_policy, rollout
 from taskalloc_env import TaskAllocEnv
@@ -183,10 +183,7 @@ def robustness(scenarios: int, seed: int, loss: float, jobs: int = 1,
                algorithms: Sequence[str] = ALGORITHMS) -> list[dict[str, Any]]:
     """Run every case; one verdict per (algorithm, scenario)."""
     todo = cases(scenarios, seed, loss, algorithms)
-    if jobs > 1:
-        with ProcessPoolExecutor(jobs) as pool:
-            return list(pool.map(run_case, todo, chunksize=8))
-    return [run_case(c) for c in todo]
+    return list(parallel_map(run_case, todo, jobs))
 
 
 def report(verdicts: Sequence[dict[str, Any]]) -> str:

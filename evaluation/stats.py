@@ -31,6 +31,17 @@ def format_mean_sd(values: Sequence[float], digits: int = 0) -> str:
     return f"{mean:.{digits}f} ± {sd:.{digits}f}"
 
 
+def ci95_half(values: Sequence[float] | np.ndarray, axis: int | None = None) -> float | np.ndarray:
+    """Half-width of the 95 % t-interval of the mean (over ``axis``; all values without one); 0 for fewer than
+    two values."""
+    x = np.asarray(values, dtype=float)
+    n = x.size if axis is None else x.shape[axis]
+    if n < 2:
+        return 0.0 if axis is None else np.zeros(np.delete(x.shape, axis))
+    half = stats.t.ppf(0.975, n - 1) * x.std(axis=axis, ddof=1) / np.sqrt(n)
+    return float(half) if axis is None else half
+
+
 def paired_t_pvalue(a: Sequence[float], b: Sequence[float]) -> float:
     """Two-sided paired t-test p-value of a − b; 1.0 when every difference is equal (no evidence either way)."""
     d = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
@@ -83,7 +94,7 @@ def paired(a: Sequence[float], b: Sequence[float]) -> PairedComparison:
     if a_arr.shape != b_arr.shape:
         raise ValueError(f"paired samples need equal lengths, got {a_arr.size} and {b_arr.size}")
     mean_diff, sd_diff = mean_sd(a_arr - b_arr)
-    half = float(stats.t.ppf(0.975, a_arr.size - 1) * sd_diff / np.sqrt(a_arr.size)) if a_arr.size > 1 else np.nan
+    half = ci95_half(a_arr - b_arr) if a_arr.size > 1 else np.nan
     denominator = b_arr.mean() if b_arr.size else float("nan")
     ratio = float(a_arr.mean() / denominator) if denominator else float("nan")
     return PairedComparison(n=int(a_arr.size), mean_diff=mean_diff, sd_diff=sd_diff,

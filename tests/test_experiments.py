@@ -12,7 +12,7 @@ from scipy import stats as sps
 
 from evaluation import experiments
 from evaluation.episodes import Episode, check_pairing, fingerprint, run_episode, run_episodes
-from evaluation.stats import mean_sd, paired, paired_t_pvalue, share_better, share_tied, wilcoxon_pvalue
+from evaluation.stats import ci95_half, mean_sd, paired, paired_t_pvalue, share_better, share_tied, wilcoxon_pvalue
 from taskalloc_env import TaskAllocEnv, resolve_config, resources
 
 SMALL = {"n_agents": 4, "n_tasks": 6, "agents_per_task": 2, "start_time_range": [0.0, 30.0]}
@@ -35,6 +35,14 @@ def test_paired_t_matches_hand_computation_and_scipy():
     assert paired_t_pvalue(a, b) == pytest.approx(sps.ttest_rel(a, b).pvalue)
     # an unpaired test on the same numbers gives another answer: pairing matters
     assert paired_t_pvalue(a, b) != pytest.approx(sps.ttest_ind(a, b).pvalue)
+
+
+def test_the_95_interval_matches_scipy_along_any_axis():
+    x = np.array([[1.0, 4.0], [2.0, 8.0], [4.0, 5.0]])
+    low, high = sps.t.interval(0.95, 2, loc=x[:, 1].mean(), scale=sps.sem(x[:, 1]))
+    assert ci95_half(x[:, 1]) == pytest.approx((high - low) / 2)
+    np.testing.assert_allclose(ci95_half(x, axis=0), [ci95_half(x[:, 0]), ci95_half(x[:, 1])])
+    assert ci95_half([3.0]) == 0.0 and ci95_half(x[:1], axis=0).tolist() == [0.0, 0.0]
 
 
 def test_wilcoxon_and_shares():

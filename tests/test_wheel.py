@@ -51,7 +51,9 @@ def test_wheel_installs_and_runs_outside_the_checkout(tmp_path):
     env_dir = tmp_path / "venv"
     venv.create(env_dir, with_pip=True)
     python = str(env_dir / "bin" / "python")
-    run([python, "-m", "pip", "install", "-q", f"torch=={TORCH}"], cwd=tmp_path)
+    index = os.environ.get("TORCH_INDEX_URL")          # as scripts/setup.sh: the CPU index where pip's own is CUDA
+    run([python, "-m", "pip", "install", "-q", *(["--index-url", index] if index else []), f"torch=={TORCH}"],
+        cwd=tmp_path)
     run([python, "-m", "pip", "install", "-q", f"{wheel}[learned]"], cwd=tmp_path)
     outside = tmp_path / "elsewhere"
     outside.mkdir()
