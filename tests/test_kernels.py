@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -180,3 +182,16 @@ def test_compiled_view_rows_equal_the_reference(case):
     kn.bundles[row] = [int(j) for j in np.flatnonzero(kn.bids[row, row] > 0)]
     kn.quit_blocked[row] = ~kn.quit_blocked[row]
     same(refresh_rows(first, [row], kn, *args, **options), bid_view(kn, *args, **options))
+
+
+def test_the_references_can_be_chosen_and_a_typo_is_refused():
+    import subprocess
+    import sys
+
+    def compiled(value: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-c", "import taskalloc_env.kernels as k; print(k.COMPILED)"],
+                              capture_output=True, text=True, env={**os.environ, "TASKALLOC_KERNELS": value})
+
+    assert compiled("reference").stdout.strip() == "False"
+    bad = compiled("fast")
+    assert bad.returncode != 0 and "TASKALLOC_KERNELS='fast' is not one of" in bad.stderr

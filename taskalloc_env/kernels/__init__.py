@@ -2,13 +2,16 @@
 
 * ``merge.exchange_all``: a round's deliveries on the receivers' tables (``consensus.exchange_reference``);
 * ``plan.plan_paths``: path timing and insertion gains (``scoring.ScoringModel.plan_reference``);
+* ``bids.bid_rows``: the bid view's rows, eligibility and the outbid test (``bidding.bid_view``).
 
-Without numba (``COMPILED`` false) the numpy references run instead. ``tests/test_kernels.py`` compares each
-kernel with its reference on random inputs.
+Without numba, or with the environment variable ``TASKALLOC_KERNELS=reference``, ``COMPILED`` is false and the
+numpy references run instead (the same allocations; observations may differ in the last bit of an ``exp``, see
+docs/decisions.md). ``tests/test_kernels.py`` compares each kernel with its reference on random inputs.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from typing import Any
 
@@ -17,7 +20,11 @@ try:
 except ImportError:          # pragma: no cover - numba is a dependency; the references still work without it
     numba = None
 
-COMPILED = numba is not None
+MODES = ("compiled", "reference")
+MODE = os.environ.get("TASKALLOC_KERNELS", "compiled")
+if MODE not in MODES:
+    raise ImportError(f"TASKALLOC_KERNELS={MODE!r} is not one of {MODES}")
+COMPILED = numba is not None and MODE == "compiled"
 
 
 def jit(function: Callable[..., Any]) -> Callable[..., Any]:
