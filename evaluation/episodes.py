@@ -48,12 +48,12 @@ CENTRALISED = {"sgama": ("SGAMA", sgama), "exact": ("exact", exact)}
 SOLVERS = {"cbba-duo": ("CBBA preferred duo", preferred_duo_cbba)}
 METRICS = ("score", "valid_tasks", "conflicts", "rounds", "messages", "comm_steps", "rounds_to_agreement",
            "comm_steps_to_agreement", "invalid_actions", "informative_messages", "data_items", "bids", "quits",
-           "messages_lost", "messages_delayed", "data_received_per_agent", "data_sent_per_agent",
+           "quits_seen", "messages_lost", "messages_delayed", "data_received_per_agent", "data_sent_per_agent",
            "data_per_assignment", "data_per_agent_per_assignment", "conflicting_bids_per_agent", "dropped_agents",
            "connected", "fully_connected")
 SUMMARY_FIELDS = ("score", "valid_tasks", "rounds", "messages")
 PROTOCOL_METRICS = ("rounds", "messages", "comm_steps", "rounds_to_agreement", "comm_steps_to_agreement",
-                    "invalid_actions", "informative_messages", "data_items", "quits", "messages_lost",
+                    "invalid_actions", "informative_messages", "data_items", "quits", "quits_seen", "messages_lost",
                     "messages_delayed", "data_received_per_agent", "data_sent_per_agent", "data_per_assignment",
                     "data_per_agent_per_assignment", "conflicting_bids_per_agent", "dropped_agents")
 

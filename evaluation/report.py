@@ -23,7 +23,8 @@ from evaluation.stats import PairedComparison, ci95_half, format_mean_sd, format
 METRIC_LABELS = {
     "score": "score", "valid_tasks": "valid tasks", "conflicts": "conflicts", "rounds": "rounds",
     "messages": "messages", "comm_steps": "comm steps / agent", "informative_messages": "informative msgs",
-    "data_items": "data items", "bids": "bids", "quits": "quits", "rounds_to_agreement": "rounds to agreement",
+    "data_items": "data items", "bids": "bids", "quits": "quits", "quits_seen": "quits seen",
+    "rounds_to_agreement": "rounds to agreement",
     "comm_steps_to_agreement": "comm steps / agent to agreement", "invalid_actions": "invalid actions",
     "messages_lost": "messages lost", "messages_delayed": "messages delayed",
     "data_received_per_agent": "data items received / agent", "data_sent_per_agent": "data items sent / agent",
@@ -34,8 +35,9 @@ METRIC_LABELS = {
     "converged": "converged",
 }
 METRIC_DIGITS = {"score": 0, "valid_tasks": 1, "conflicts": 1, "rounds": 1, "messages": 0, "comm_steps": 1,
-                 "informative_messages": 0, "data_items": 0, "bids": 0, "quits": 1, "rounds_to_agreement": 1,
-                 "comm_steps_to_agreement": 1, "invalid_actions": 1, "messages_lost": 0, "messages_delayed": 0,
+                 "informative_messages": 0, "data_items": 0, "bids": 0, "quits": 1, "quits_seen": 1,
+                 "rounds_to_agreement": 1, "comm_steps_to_agreement": 1, "invalid_actions": 1, "messages_lost": 0,
+                 "messages_delayed": 0,
                  "data_received_per_agent": 0, "data_sent_per_agent": 0, "data_per_assignment": 0,
                  "data_per_agent_per_assignment": 2,
                  "conflicting_bids_per_agent": 2, "dropped_agents": 2, "connected": 2, "fully_connected": 2,

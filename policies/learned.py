@@ -6,6 +6,8 @@ weights, nothing executable): a committed model by name (``train_small``, from `
 weights (parameter sharing); the action is greedy (``deterministic=True``: the most likely kind of action — pass,
 bid or quit — then the most likely action of that kind, see ``greedy_actions``) or a sample. The pooling network
 has no weight tied to the number of tasks, so a checkpoint trained on ``train_small`` also runs on larger scenarios.
+It also runs where the environment adds mode-dependent task features it never saw (``member_silence`` on a faulty
+network, ``released`` with pop-up tasks): the actor reads its own features, selected by name (``feature_columns``).
 
 ``env_overrides`` are the protocol options the policy was trained with (e.g. ``task_quitting=True, delta=1`` so it
 can quit tasks as CBGABI does); runners build the environment with them.
@@ -22,6 +24,11 @@ import numpy as np
 from policies.base import Policy
 from policies.checkpoint import Checkpoint, CheckpointError, load
 from taskalloc_env import resources
+from taskalloc_env.observation import FAULT_FEATURES, POPUP_FEATURES, ObservationLayout
+
+# task features the environment adds only in some modes (a faulty network, pop-up tasks): a checkpoint trained
+# without them runs on such an environment with them dropped from its input
+OPTIONAL_TASK_FEATURES = FAULT_FEATURES + POPUP_FEATURES
 
 
 def resolve(source: str | Path) -> Any:
@@ -49,6 +56,7 @@ class LearnedPolicy(Policy):
         self.deterministic = deterministic
         self.name = name
         self.rng = np.random.default_rng()
+        self.columns: np.ndarray | None = None     # observation columns the actor reads (None: all of them)
 
     @classmethod
     def from_checkpoint(cls, checkpoint: Checkpoint, deterministic: bool = True, name: str = "learned"
@@ -70,11 +78,14 @@ class LearnedPolicy(Policy):
     def start(self, env: Any, seed: int | None = None) -> None:
         super().start(env, seed)
         layout = self.layout
-        if (self.own_features, self.task_features) != (layout.own_names, layout.task_names):
+        columns = feature_columns(layout, self.own_features, self.task_features)
+        if columns is False:
             raise ValueError(f"{self.name} was trained on other observation features: own {self.own_features}, "
                              f"per task {self.task_features}; this environment has own {layout.own_names}, per task "
-                             f"{layout.task_names}")
-        if not self.actor.fits(layout.own_size, layout.task_size, layout.n_tasks):
+                             f"{layout.task_names} (only the mode-dependent task features {OPTIONAL_TASK_FEATURES} "
+                             "may be added by the environment and are then dropped)")
+        self.columns = None if columns is True else columns
+        if not self.actor.fits(len(self.own_features), len(self.task_features), layout.n_tasks):
             raise ValueError(f"{self.name} ({type(self.actor).__name__} {self.actor.config()}) does not fit "
                              f"{layout.n_tasks} tasks (a plain MLP is tied to the number of tasks it was trained on)")
         self.rng = np.random.default_rng(seed)
@@ -87,6 +98,8 @@ class LearnedPolicy(Policy):
             return {}
         agents = list(observations)
         obs = np.stack([observations[a]["observation"] for a in agents])
+        if self.columns is not None:
+            obs = obs[:, self.columns]
         masks = np.stack([observations[a]["action_mask"] for a in agents])
         logits = masked_logits(self.actor, obs, masks).cpu().numpy().astype(np.float64)
         logits[masks == 0] = -np.inf
@@ -113,3 +126,24 @@ def greedy_actions(logits: np.ndarray, probs: np.ndarray) -> np.ndarray:
     bid = 1 + logits[:, 1: m + 1].argmax(axis=1)
     quit_ = m + 1 + logits[:, m + 1:].argmax(axis=1)
     return np.select([kind == 0, kind == 1], [0, bid], quit_)
+
+
+def feature_columns(layout: ObservationLayout, own_features: tuple[str, ...], task_features: tuple[str, ...]
+                    ) -> np.ndarray | bool:
+    """The columns of ``layout``'s observation that hold a checkpoint's features, in the checkpoint's order.
+
+    ``True`` when the layout is exactly the checkpoint's (the observation is used as it is); ``False`` when the
+    checkpoint cannot run on it: the own features differ, or the environment lacks a task feature the checkpoint
+    reads, or it has an extra task feature that is not one of ``OPTIONAL_TASK_FEATURES`` (``member_silence`` on a
+    faulty network, ``released`` with pop-up tasks; see ``taskalloc_env.observation``). Those extras are dropped:
+    the actor sees the features it was trained on, computed the same way, under the new network or task release.
+    """
+    if (own_features, task_features) == (layout.own_names, layout.task_names):
+        return True
+    extra = set(layout.task_names) - set(task_features)
+    if (own_features != layout.own_names or not set(task_features) <= set(layout.task_names)
+            or not extra <= set(OPTIONAL_TASK_FEATURES) or len(set(task_features)) != len(task_features)):
+        return False
+    picked = np.array([layout.task_column(name) for name in task_features])
+    tasks = layout.own_size + np.arange(layout.n_tasks)[:, None] * layout.task_size + picked[None, :]
+    return np.concatenate([np.arange(layout.own_size), tasks.ravel()])

@@ -167,7 +167,9 @@ class AsyncProtocol(Protocol):
             arrived = np.stack([deliveries.receiver, deliveries.sender, deliveries.sent,
                                 np.full(len(deliveries), now)])
             self.queue = np.concatenate([self.queue, arrived], axis=1)
+        listing = self._quitter_listed()
         self._listen(now)
+        self._count_seen_quits(listing)
         kn.timestamps[np.arange(len(self.alive)), np.arange(len(self.alive))] = now
         c.conflicting_bids += int((own_before & (kn.own_bids() <= 0) & self.alive[:, None]).sum())
         if self.cfg.task_quitting:

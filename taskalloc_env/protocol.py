@@ -125,6 +125,7 @@ class Protocol:
         self._score: TeamScore | None = None
         self._last_bids = self.knowledge.bids.copy()
         self._last_bundles: list[list[int]] = [[] for _ in range(s.n_agents)]
+        self._pending_quits: dict[tuple[int, int], None] = {}     # (quitter, task): quits no other agent saw yet
 
     # -- cached derived state ------------------------------------------------------------------------------------
     def _touch(self, agent: int | None = None) -> None:
@@ -219,6 +220,7 @@ class Protocol:
         value = float(view.bid[agent, task])
         kn.add_to_bundle(agent, task, int(view.slot[agent, task]), value, self.round)
         self.counters.bids += 1
+        self._pending_quits.pop((agent, task), None)        # re-bid before anyone saw the quit: it stays unseen
         self._touch(agent)
         return value
 
@@ -255,6 +257,7 @@ class Protocol:
         kn.quit[agent, task] = True
         kn.quit_blocked[agent, task] = self.cfg.quit_block == "until_joined"
         self.counters.quits += 1
+        self._pending_quits[agent, task] = None
         self._touch(agent)
         return released
 
@@ -271,8 +274,10 @@ class Protocol:
         self._snapshots[self.round] = snap
         sent = self.network.send(self.round, np.flatnonzero(self.alive), snap.data_items)
         deliveries = self.network.deliver(self.round, self.alive)
+        listing = self._quitter_listed()
         traffic = exchange(kn, deliveries, self._snapshots, self.round, self.scenario.task_agents, self.equipment,
                            self.cfg.cbba_table)
+        self._count_seen_quits(listing)
         self.last_heard[deliveries.receiver, deliveries.sender] = self.round
         oldest = min(self.network.in_flight(), default=self.round)
         self._snapshots = {r: v for r, v in self._snapshots.items() if r >= oldest}
@@ -304,6 +309,28 @@ class Protocol:
                           and bool(self.released.all()))
         self._touch()
         return traffic
+
+    def _quitter_listed(self) -> np.ndarray | None:
+        """(N, Q) whether each agent's table lists the quitter on each pending quit's task (None: no pending quit);
+        taken just before a merge, for ``_count_seen_quits``."""
+        if not self._pending_quits:
+            return None
+        quitter, task = np.array(list(self._pending_quits)).T
+        return self.knowledge.bids[:, quitter, task] > 0
+
+    def _count_seen_quits(self, listing: np.ndarray | None) -> None:
+        """``quits_seen``: a pending quit (thesis Alg 9 l. 7, X_i[i][j] = 0) is seen when a merge (Alg 6; Johnson
+        §3.3's rule for a sender's own entry) drops the quitter from the task's group in another agent's table that
+        listed it. It is counted once; a quit the quitter re-bid before that is never seen (issue 10: under
+        ``quit_block=none`` the quitter re-bids in the same bundle phase, so nobody learns of the quit)."""
+        if listing is None:
+            return
+        keys = list(self._pending_quits)
+        quitter, task = np.array(keys).T
+        seen = (listing & (self.knowledge.bids[:, quitter, task] <= 0)).any(axis=0)
+        for q in np.flatnonzero(seen):
+            del self._pending_quits[keys[q]]
+        self.counters.quits_seen += int(seen.sum())
 
     @property
     def globally_converged(self) -> bool:

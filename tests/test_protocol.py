@@ -376,6 +376,56 @@ def test_quit_block_none_lets_the_quitter_bid_again_at_once():
     assert p.view().can_bid[0, 0]
 
 
+def test_a_quit_the_others_list_is_seen():
+    """``quits_seen`` (issue 10): agents 0 and 2 hold T0 (L = 3) and every table lists both after round 1; agent 0
+    quits at T = 3 and, blocked by ``until_joined``, does not re-bid. The merge of round 4 drops agent 0 from T0 in
+    the tables of agents 1 and 2: one quit, seen once (not once per agent, not again in later rounds)."""
+    p = protocol(quit_scenario(), task_quitting=True, delta=1, quit_block="until_joined")
+    p.bid(0, 0)
+    p.bid(2, 0)
+    for _ in range(3):
+        p.end_round()
+    assert (p.knowledge.bids[:, 0, 0] > 0).all()
+    p.quit(0, 0)
+    assert (p.counters.quits, p.counters.quits_seen) == (1, 0)
+    p.end_round()
+    assert (p.knowledge.bids[:, 0, 0] == 0).all()
+    assert (p.counters.quits, p.counters.quits_seen) == (1, 1)
+    for _ in range(3):
+        p.end_round()
+    assert p.counters.quits_seen == 1
+
+
+def test_a_quit_re_bid_in_the_same_bundle_phase_is_not_seen():
+    """The case issue 10 measured (985 of 989 quits at L_j = 4): with ``quit_block=none`` the quitter bids on the task
+    again before the round ends, the others' tables never drop it, and the quit goes unseen."""
+    p = protocol(quit_scenario(), task_quitting=True, delta=1, quit_block="none")
+    p.bid(0, 0)
+    p.bid(2, 0)
+    for _ in range(3):
+        p.end_round()
+    p.quit(0, 0)
+    p.bid(0, 0)
+    for _ in range(3):
+        p.end_round()
+        assert (p.knowledge.bids[:, 0, 0] > 0).all()
+    assert (p.counters.quits, p.counters.quits_seen) == (1, 0)
+
+
+def test_a_quit_nobody_listed_is_not_seen():
+    """A quit whose holder no other table lists yet (the quitter alone on a line out of range) is not seen, even
+    when it is not re-bid: nothing reached another table."""
+    s = build([agent(0), agent(5), agent(9)], [task(0, agents=3, start=100)])
+    p = protocol(s, task_quitting=True, delta=1, quit_block="until_joined", comm_range=1.0)
+    p.bid(0, 0)
+    for _ in range(3):
+        p.end_round()
+    p.quit(0, 0)
+    for _ in range(2):
+        p.end_round()
+    assert (p.counters.quits, p.counters.quits_seen) == (1, 0)
+
+
 @pytest.mark.parametrize("reset_on, allowed", [("additions", True), ("any_change", False)])
 def test_reset_on_a_member_leaving(reset_on, allowed):
     """A member leaving changes the column without adding anyone: only ``any_change`` resets the timer."""
