@@ -9,7 +9,8 @@ design, thesis §5.3.1). The table gives mean ± sd of the score (``scoring.team
 rounds and messages received (``msgs / agent`` = messages / N_n, the thesis's per-agent communication steps),
 episodes that hit the round bound (kept, counted), and the paired comparison with CBGA (mean difference, paired
 t-test p-value, share of seeds won). ``--out DIR`` writes ``compare.md``, ``compare.csv`` (the table),
-``episodes.csv`` and ``compare.png`` (score bars with sd; per-seed differences against CBGA).
+``episodes.csv`` and ``compare.png`` (score bars with sd; per-seed differences against CBGA); a folder that already
+holds files is refused unless ``--overwrite`` is given.
 """
 
 from __future__ import annotations
@@ -31,10 +32,12 @@ from evaluation.report import (
     compare_cells,
     markdown_table,
     not_converged,
+    refuse_existing,
     values,
     write_csv,
 )
 from evaluation.stats import format_p, mean_sd
+from policies.checkpoint import CheckpointError
 from taskalloc_env import TaskAllocConfig, resolve_config, resources
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError
@@ -62,6 +65,8 @@ def usable_learned(source: str, cfg: TaskAllocConfig) -> tuple[str | None, str]:
     except ImportError as exc:
         return None, f"learned policy {source}: skipped, it needs the learned extra: pip install taskalloc[learned] " \
                      f"({exc})"
+    except CheckpointError as exc:
+        return None, f"learned policy {source}: skipped, the checkpoint cannot be loaded ({exc})"
     except ValueError as exc:
         return None, f"learned policy {source}: skipped, it does not fit this scenario ({exc})"
     return solver, ""
@@ -165,7 +170,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--episodes", type=int, default=20, help="paired seeds 0..N-1 (default 20)")
     parser.add_argument("--set", dest="overrides", type=_override, action="append", default=[],
                         metavar="FIELD=VALUE", help="config override, e.g. --set agents_per_task=1 (repeatable)")
-    parser.add_argument("--out", type=Path, default=None, help="write compare.md/.csv/.png and episodes.csv here")
+    parser.add_argument("--out", type=Path, default=None, help="write compare.md/.csv/.png and episodes.csv here "
+                        "(a folder that holds files is refused unless --overwrite)")
+    parser.add_argument("--overwrite", action="store_true", help="replace the files of an existing --out folder")
     parser.add_argument("--jobs", type=int, default=default_jobs(),
                         help=f"worker processes (default: every core, {default_jobs()} here)")
     parser.add_argument("--backend", choices=BACKENDS, default="local",
@@ -185,6 +192,8 @@ def run(args: argparse.Namespace) -> int:
                           "tests need two seeds)")
     if args.jobs < 1:
         raise ConfigError(f"--jobs: got {args.jobs}; allowed: an integer >= 1")
+    if args.out is not None:
+        refuse_existing(args.out, args.overwrite)
     started = time.perf_counter()
     learned = [] if args.no_learned else args.learned
     text = compare(args.scenario, args.episodes, dict(args.overrides), args.jobs, args.out, learned, args.progress,

@@ -1,7 +1,8 @@
 """Experiment runner: the thesis's experiments (§3.3, §5.3) as YAML files, run on paired seeds, with reports.
 
     python -m evaluation.experiments run configs/experiments/fig5_16_l4.yaml [--episodes N] [--jobs N] [--quick]
-    python -m evaluation.experiments run --all            # every configs/experiments/*.yaml, updates docs/results.md
+    python -m evaluation.experiments run --all --overwrite   # every configs/experiments/*.yaml, rewrites results/
+                                                             # and docs/results.md
     python -m evaluation.experiments report --all         # tables, plots and docs again from the saved CSVs
     python -m evaluation.experiments list
 
@@ -12,7 +13,9 @@ Wilcoxon p-values, share of seeds won and tied; the published claims checked), o
 per-seed differences at each headline point, ``config.yaml`` (the experiment and every resolved environment config)
 and ``run.json`` (package versions, commit, wall time). A full run also rewrites the experiment's block in
 ``docs/results.md`` (between ``<!-- results:NAME:start/end -->`` markers; the text around the blocks is kept).
-``--quick`` runs 2 seeds at ≤ 3 sweep points into ``results/tmp/quick`` and leaves the docs alone.
+``--quick`` runs 2 seeds at ≤ 3 sweep points into ``results/tmp/quick`` and leaves the docs alone. ``run`` refuses
+(one line, exit status 2) an experiment folder that already holds files, or a results page that already holds the
+experiment's block, unless ``--overwrite`` is given; ``report`` rewrites them by design.
 
 Experiment YAML keys: ``name``, ``title``, ``source``, ``scenario`` (scenario name or path), ``overrides`` (config
 fields), ``sweep`` (``{field, values, label}``, ``{points: [mapping…], x, label}``, a point's ``label`` key naming
@@ -68,6 +71,7 @@ from evaluation.report import (
     paired_columns,
     read_csv,
     reference_plot,
+    refuse_existing,
     sweep_plot,
     values,
     write_csv,
@@ -181,9 +185,21 @@ class Experiment:
         return resolve_config(self.scenario, **self.overrides, **point.overrides, **series.overrides)
 
 
+SWEEP_KEYS = {"field", "values", "points", "x", "grid", "label"}
+
+
 def _points(sweep: Mapping[str, Any] | None) -> tuple[list[Point], str]:
     if not sweep:
         return [Point("all", "all", {})], ""
+    if not isinstance(sweep, Mapping) or set(sweep) - SWEEP_KEYS or not {"field", "points", "grid"} & set(sweep):
+        raise ConfigError(f"sweep is {{field, values, label}}, {{points, x, label}} or {{grid, label}}, got {sweep!r}")
+    for key in ("values", "points"):
+        needed = key in sweep or (key == "values" and "field" in sweep)
+        if needed and (not isinstance(sweep.get(key), list) or not sweep[key]):
+            raise ConfigError(f"sweep {key} must be a non-empty list, got {sweep.get(key)!r}")
+    if "grid" in sweep and (not isinstance(sweep["grid"], Mapping)
+                            or not all(isinstance(v, list) and v for v in sweep["grid"].values())):
+        raise ConfigError(f"sweep grid must map fields to non-empty lists of values, got {sweep['grid']!r}")
     if "grid" in sweep:
         fields = list(sweep["grid"])
         combos = itertools.product(*(sweep["grid"][f] for f in fields))
@@ -235,14 +251,28 @@ def experiment_source(name_or_path: str | Path) -> Path | Any:
 
 
 def load_experiment(name_or_path: str | Path) -> Experiment:
-    """Read and validate an experiment YAML (every cell's config is resolved, so bad fields fail here)."""
+    """Read and validate an experiment YAML (every cell's config is resolved, so bad fields fail here).
+
+    Every problem is one ``ConfigError`` naming the file."""
     path = experiment_source(name_or_path)
     raw = read_yaml(path, "experiment file") or {}
     if not isinstance(raw, Mapping):
         raise ConfigError(f"experiment file {str(path)!r} must hold a mapping, got {type(raw).__name__}")
+    try:
+        return _parse(path, raw)
+    except ValueError as exc:                       # ConfigError included
+        text = str(exc)
+        raise ConfigError(text if text.startswith(str(path)) else f"{path}: {text}") from None
+    except KeyError as exc:
+        raise ConfigError(f"{path}: a required key is missing: {exc}") from None
+    except (TypeError, AttributeError, IndexError) as exc:
+        raise ConfigError(f"{path}: malformed experiment ({exc})") from None
+
+
+def _parse(path: Any, raw: Mapping[str, Any]) -> Experiment:
     unknown = set(raw) - KEYS
     if unknown:
-        raise ValueError(f"{path}: unknown keys {sorted(unknown)}; known: {sorted(KEYS)}")
+        raise ConfigError(f"{path}: unknown keys {sorted(map(str, unknown))}; known: {sorted(KEYS)}")
     points, xlabel = _points(raw.get("sweep"))
     series = []
     for entry in raw.get("series", []):
@@ -271,9 +301,11 @@ def load_experiment(name_or_path: str | Path) -> Experiment:
         name=raw.get("name", path.stem), title=raw.get("title", path.stem), source=raw.get("source", ""),
         scenario=str(raw.get("scenario", "default")), overrides=dict(raw.get("overrides") or {}), xlabel=xlabel,
         points=points, series=series, baseline=baseline, metrics=list(raw.get("metrics", ["score"])),
-        episodes=int(raw.get("episodes", 100)), headline=_select(points, _as_list(raw.get("headline")), str(path)),
+        episodes=_count(raw.get("episodes", 100), "episodes"),
+        headline=_select(points, _as_list(raw.get("headline")), str(path)),
         published=str(raw.get("published", "")).strip(), checks=checks, quick_points=quick_points,
-        quick_episodes=int(quick.get("episodes", 2)), raw=raw, marks=_marks(raw.get("marks"), path),
+        quick_episodes=_count(quick.get("episodes", 2), "quick.episodes"), raw=raw,
+        marks=_marks(raw.get("marks"), path),
         reference=_reference(raw.get("reference"), points, path), heatmap=heatmap)
     if exp.marks and exp.heatmap:
         raise ValueError(f"{path}: marks are lines in the sweep plots, which a heatmap experiment does not draw")
@@ -327,6 +359,12 @@ def _heatmap(spec: Mapping[str, Any] | None, sweep: Mapping[str, Any] | None, la
     if difference and (len(difference) != 2 or not set(difference) <= set(heat.series)):
         raise ValueError(f"{path}: heatmap difference must name two of its series, got {difference!r}")
     return heat
+
+
+def _count(value: Any, key: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ConfigError(f"{key}: got {value!r}; allowed: an integer >= 1")
+    return value
 
 
 def _as_list(value: Any) -> list:
@@ -675,7 +713,7 @@ def _docs_block(exp: Experiment, cells: Mapping, points: Sequence[Point], headli
     setting = ", ".join(f"{k} = {_label(v)}" for k, v in exp.overrides.items())
     parts = [f"*Source: {exp.source}. Scenario `{exp.scenario}`{', ' + setting if setting else ''}; "
              f"{seeds_run} paired seeds per cell (seeds 0–{seeds_run - 1}). Regenerate: "
-             f"`python -m evaluation.experiments run configs/experiments/{exp.name}.yaml`. "
+             f"`python -m evaluation.experiments run configs/experiments/{exp.name}.yaml --overwrite`. "
              f"Full tables: [{rel}/table.md]({rel}/table.md), per-episode data: `{rel}/episodes.csv`.*\n"]
     if exp.published:
         parts.append(f"**Published:** {exp.published}\n")
@@ -768,6 +806,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                      help="local: --jobs processes; ray: Ray tasks on a local Ray instance or the cluster RAY_ADDRESS "
                           "names (pip install taskalloc[ray]); the same tables either way")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.add_argument("--overwrite", action="store_true",
+                     help="replace existing results (an experiment folder that holds files, or the experiment's "
+                          "block on the results page); without it they are refused")
     args = parser.parse_args(argv)
     if args.command == "list":
         for name in resources.names("experiments"):
@@ -779,6 +820,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.no_docs:
         docs = None
     experiments = [load_experiment(p) for p in experiment_paths(args.paths, args.all)]
+    if args.command == "run":
+        for exp in experiments:
+            refuse_existing(out / exp.name, args.overwrite, "output folder")
+            if docs is not None and not args.overwrite and docs.is_file() \
+                    and f"<!-- results:{exp.name}:start -->" in docs.read_text():
+                raise ConfigError(f"{docs} already holds the results of {exp.name}; pass --overwrite to replace "
+                                  "them, or --no-docs to leave the page alone")
     started = time.perf_counter()
     for exp in experiments:
         if args.command == "report":

@@ -19,6 +19,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from evaluation.stats import PairedComparison, ci95_half, format_mean_sd, format_p, paired
+from taskalloc_env.errors import ConfigError
 
 METRIC_LABELS = {
     "score": "score", "valid_tasks": "valid tasks", "conflicts": "conflicts", "rounds": "rounds",
@@ -44,6 +45,15 @@ METRIC_DIGITS = {"score": 0, "valid_tasks": 1, "conflicts": 1, "rounds": 1, "mes
                  "converged": 2}
 # yes/no figures: a cell shows the share of its episodes (``62 %``), a plot the share with its 95 % interval
 SHARE_METRICS = ("connected", "fully_connected", "converged")
+
+
+def refuse_existing(folder: Path, overwrite: bool, option: str = "--out") -> None:
+    """Refuse (``ConfigError``) to write into a folder that exists and holds files, unless ``overwrite``."""
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"{option} {folder}: exists and is not a folder")
+    if not overwrite and folder.is_dir() and any(folder.iterdir()):
+        raise ConfigError(f"{option} {folder}: exists and is not empty; pass --overwrite to replace its files, or "
+                          "choose another folder")
 
 
 def values(rows: Iterable[Mapping[str, Any]], metric: str) -> np.ndarray:

@@ -9,7 +9,7 @@ A checkpoint is two files with one stem, ``<stem>.json`` and ``<stem>.safetensor
 
 Loading parses JSON and tensors, builds a known class from integers and loads the weights strictly; nothing in the
 files is executed. A stable-baselines3 ``.zip`` is different: SB3's loader unpickles its ``data`` entries, so a
-crafted zip runs code. ``load`` refuses zips unless ``allow_pickle=True`` (with a warning); ``convert_sb3_zip``
+crafted zip runs code. ``load`` refuses zips unless ``allow_pickle=True`` (with a warning); ``sb3_zip_to_checkpoint``
 turns a zip trained by this project into a checkpoint while reading only its JSON entries and its weights, which
 torch reads with ``weights_only=True``.
 
@@ -240,8 +240,9 @@ def _load_sb3_zip(path: Path, allow_pickle: bool) -> Checkpoint:
     if not allow_pickle:
         raise CheckpointError(
             f"{path} is a stable-baselines3 zip: its entries are pickles, and SB3's loader runs whatever code they "
-            f"name. Convert it without unpickling (`python -m policies.checkpoint convert {path} OUT`), or pass "
-            "allow_pickle=True (CLI: --allow-pickle) to load it with SB3's loader if you trust the file")
+            f"name. Convert it without unpickling (`python -m policies.checkpoint convert {path} OUT`), or, if you "
+            "trust the file, load it with SB3's loader from Python: LearnedPolicy.load(path, allow_pickle=True) "
+            "(make_policy('learned:PATH', allow_pickle=True)); no command line loads pickles")
     from stable_baselines3.common.save_util import load_from_zip_file
 
     warnings.warn(f"allow_pickle=True: SB3's loader unpickles {path}, which runs any code the file names; "

@@ -538,6 +538,10 @@ def load_config(name: str | Path = "default", **overrides: Any) -> TaskAllocConf
     if not isinstance(data, Mapping):
         raise ConfigError(f"scenario file {str(source)!r} must hold a mapping of config fields, "
                           f"got {type(data).__name__}")
+    unknown = sorted(map(str, set(data) - set(_FIELDS)))
+    if unknown:
+        raise ConfigError(f"scenario file {str(source)!r}: unknown config field(s) {unknown}; known fields: "
+                          f"{sorted(_FIELDS)}")
     return from_mapping({**data, **overrides})
 
 

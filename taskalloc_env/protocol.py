@@ -48,9 +48,16 @@ def memory_estimate(n_agents: int, n_tasks: int, max_bundle: int | None = None) 
     merge's receiver blocks, the before/after tables of the convergence test). A batched gain computation holds ten
     (N, P + 1, M) arrays for paths of up to P = max_bundle tasks; observations are N·22·M values, built three times.
     """
+    return sum(_memory_terms(n_agents, n_tasks, max_bundle).values())
+
+
+def _memory_terms(n_agents: int, n_tasks: int, max_bundle: int | None) -> dict[str, int]:
+    """The terms of ``memory_estimate`` in bytes, keyed by what they hold."""
     n, m = int(n_agents), int(n_tasks)
     p = min(m, int(max_bundle or m))
-    return 8 * (7 * n * n * m + 10 * n * m * (p + 1) + 70 * n * m)
+    return {"local tables of N·N·M values": 8 * 7 * n * n * m,
+            "path gains of N·M·(P+1) values (P = max_bundle)": 8 * 10 * n * m * (p + 1),
+            "observations of N·22·M values": 8 * 70 * n * m}
 
 
 def available_memory() -> int:
@@ -67,11 +74,12 @@ def available_memory() -> int:
 
 def check_memory(n_agents: int, n_tasks: int, max_bundle: int | None, limit_gb: float | None) -> None:
     """Refuse a size whose estimate exceeds ``limit_gb`` (default: the memory available now), before allocating."""
-    need = memory_estimate(n_agents, n_tasks, max_bundle)
+    terms = _memory_terms(n_agents, n_tasks, max_bundle)
+    need, largest = sum(terms.values()), max(terms, key=terms.__getitem__)
     limit = available_memory() if limit_gb is None else limit_gb * 2**30
     if need > limit:
-        raise ConfigError(f"{n_agents} agents × {n_tasks} tasks need about {need / 2**30:.1f} GiB (local tables of "
-                          f"N·N·M values, see memory_estimate); the limit is {limit / 2**30:.1f} GiB "
+        raise ConfigError(f"{n_agents} agents × {n_tasks} tasks need about {need / 2**30:.1f} GiB (mostly {largest}, "
+                          f"see memory_estimate); the limit is {limit / 2**30:.1f} GiB "
                           f"({'available now' if limit_gb is None else 'memory_limit_gb'}); pass memory_limit_gb= to "
                           "raise it")
 
