@@ -3,7 +3,7 @@
     python -m evaluation.acbba_experiments profiles --seeds 20     # Figs 4-2, 4-3, 4-4: message profiles
     python -m evaluation.acbba_experiments sweep --seeds 10        # Fig 4-5: messages, convergence, separation time
     python -m evaluation.acbba_experiments versus --seeds 50       # ACBBA vs CBBA, perfect and faulty links
-    python -m evaluation.acbba_experiments all                     # the three, into results/acbba/
+    python -m evaluation.acbba_experiments all --overwrite         # the three, into results/acbba/ (replacing them)
 
 Johnson's setting (§4.1.3, extraction lines 916–939): "8 agents, with a maximum bundle size of 5, bidding on 35
 tasks"; all tasks at the start (Fig 4-2), or "an initial allocation of 10 tasks ... then every 0.2 seconds after, a
@@ -38,7 +38,7 @@ from evaluation.pool import parallel_map
 from evaluation.report import markdown_table
 from policies import make_policy
 from taskalloc_env import TaskAllocEnv
-from taskalloc_env.errors import run_cli
+from taskalloc_env.errors import ConfigError, run_cli
 
 TICK_MS = 1.0                   # our unit: one tick is 1 ms of Johnson's wall clock
 BIN = 10                        # profile bins of 10 ticks (Johnson: "a large spike within the first 10 ms")
@@ -262,10 +262,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("command", choices=[*COMMANDS, "all"])
     parser.add_argument("--seeds", type=int, default=None, help="seeds per point (defaults: 20, 10, 50)")
     parser.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes (default: every core)")
-    parser.add_argument("--out", type=Path, default=Path("results/acbba"), help="output folder")
+    parser.add_argument("--out", type=Path, default=Path("results/acbba"),
+                        help="output folder (a command whose table is there already is refused unless --overwrite)")
+    parser.add_argument("--overwrite", action="store_true", help="replace the files of commands run before")
     args = parser.parse_args(argv)
+    names = list(COMMANDS) if args.command == "all" else [args.command]
+    done = [name for name in names if (args.out / f"{name}.md").exists()]
+    if done and not args.overwrite:
+        raise ConfigError(f"--out {args.out}: already holds the results of {', '.join(done)}; pass --overwrite to "
+                          "replace them, or choose another folder")
     args.out.mkdir(parents=True, exist_ok=True)
-    for name in COMMANDS if args.command == "all" else [args.command]:
+    for name in names:
         table = COMMANDS[name](args.seeds or DEFAULT_SEEDS[name], args.jobs, args.out)
         (args.out / f"{name}.md").write_text(table + "\n")
         print(f"## {name}\n\n{table}\n")

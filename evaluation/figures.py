@@ -1,6 +1,6 @@
 """Figures of single instances: agents, communication ranges, links and the assignment (thesis §4.3, Figs 4.2–4.5).
 
-    python -m evaluation.figures links                       # results/fig4_2_5_links/*.png, seed picked as below
+    python -m evaluation.figures links --overwrite           # results/fig4_2_5_links/*.png, seed picked as below
     python -m evaluation.figures links --seed 7 --out /tmp/links
 
 The thesis shows one instance at a few communication ranges: 10 agents and 20 single-agent tasks (CBBA) at r = 1,
@@ -27,6 +27,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from evaluation.episodes import solve
+from evaluation.report import refuse_existing
 from policies import make_policy
 from taskalloc_env import TaskAllocEnv, resolve_config
 from taskalloc_env.errors import run_cli
@@ -130,8 +131,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     cmd = sub.add_parser("links", help="agents, ranges, links and assignments of one instance (Figs 4.2–4.5)")
     cmd.add_argument("--seed", type=int, default=None, help="instance seed (default: the first that fits, above)")
-    cmd.add_argument("--out", type=Path, default=Path("results") / "fig4_2_5_links", help="folder for the PNGs")
+    cmd.add_argument("--out", type=Path, default=Path("results") / "fig4_2_5_links",
+                     help="folder for the PNGs (a folder that holds files is refused unless --overwrite)")
+    cmd.add_argument("--overwrite", action="store_true", help="replace the files of an existing --out folder")
     args = parser.parse_args(argv)
+    refuse_existing(args.out, args.overwrite)
     for name, figures in links(args.out, args.seed):
         print(f"{args.out / name}: " + ", ".join(f"{k} {v:.0f}" if isinstance(v, float) else f"{k} {v}"
                                                 for k, v in figures.items()))

@@ -287,3 +287,16 @@ def test_experiment_run_overwrites_when_asked(tmp_path):
 def test_main_script_regenerates_the_committed_table_with_overwrite():
     text = (ROOT / "scripts" / "main.sh").read_text()
     assert "--out results/compare --overwrite" in text
+
+
+@pytest.mark.parametrize(("command", "written"), [
+    (("-m", "evaluation.figures", "links"), "fig.png"),
+    (("-m", "evaluation.acbba_experiments", "sweep", "--seeds", "1", "--jobs", "1"), "sweep.md"),
+])
+def test_figure_and_acbba_commands_refuse_to_replace_results(tmp_path, command, written):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / written).write_text("committed\n")
+    before = _snapshot(tmp_path)
+    _one_error_line(cli(*command, "--out", str(out)), str(out), "--overwrite")
+    assert _snapshot(tmp_path) == before
