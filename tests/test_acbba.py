@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import re
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
@@ -19,6 +20,8 @@ from taskalloc_env import TaskAllocEnv
 from taskalloc_env.async_consensus import compose
 from taskalloc_env.async_protocol import AsyncProtocol
 from taskalloc_env.cbba_table import NONE
+from taskalloc_env.config import TaskAllocConfig
+from taskalloc_env.errors import ConfigError
 from taskalloc_env.scenario import scenario_config
 from taskalloc_env.stamps import NEVER, stamp, tick_of
 
@@ -158,6 +161,26 @@ def test_evaluate_reports_global_and_local_convergence_and_their_times():
     local = rollout(TaskAllocEnv(n_agents=5, n_tasks=10, consensus="acbba", separation_time=10,
                                  termination="local", **DMG), make_policy("acbba"), seed=2)
     assert local.converged and local.locally_converged and local.counters.local_tick == local.counters.rounds
+
+
+# -- error messages ----------------------------------------------------------------------------------------------------
+def test_acbba_on_multi_agent_tasks_names_acbba_and_the_asynchronous_cbga():
+    env = TaskAllocEnv(n_agents=4, n_tasks=6, consensus="acbba", agents_per_task=2)
+    env.reset(seed=0)
+    with pytest.raises(ValueError) as err:
+        make_policy("acbba").start(env, 0)
+    text = str(err.value)
+    assert text.startswith("ACBBA assigns single-agent tasks only")
+    assert 'consensus="acbba"' in text and 'make_policy("cbgabi")' in text and "CBGA" in text
+    with pytest.raises(ValueError, match=r"^CBBA assigns single-agent tasks only .* use CBGAPolicy"):
+        make_policy("cbba").start(env, 0)
+
+
+@pytest.mark.parametrize("field, pair", [("message_ticks", (0.5, 0.1)), ("build_ticks", (3, 1))])
+def test_a_reversed_processing_time_range_says_the_upper_bound_must_not_be_below_the_lower(field, pair):
+    with pytest.raises(ConfigError, match=rf"'{field}': got {re.escape(repr(pair))}; allowed: .*upper bound >= "
+                                          r"the lower bound"):
+        TaskAllocConfig(consensus="acbba", **{field: pair})
 
 
 # -- pop-up tasks (Johnson §4.1.3, Figs 4-3 and 4-4) -------------------------------------------------------------------
