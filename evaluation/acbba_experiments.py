@@ -19,6 +19,15 @@ profile is recorded.
 
 Each command prints markdown tables (pasted into docs/results.md) and writes them, the per-run CSV and the PNGs to
 ``--out`` (default ``results/acbba``).
+
+Where the settings live: in this module, not in ``configs/experiments/``. ``JOHNSON`` is the config every run shares
+(on top of the default scenario), ``PROFILES`` the pop-up schedules of Figs 4-2 to 4-4, ``SWEEP_TASKS`` and
+``SWEEP_AGENTS`` the points of Fig 4-5, ``FAULTS`` the networks of the comparison with CBBA, ``DEFAULT_SEEDS`` the
+seeds per point, ``TICK_MS`` and ``BIN`` the units; the 1,000 random scenarios are ``acbba_check.scenario(seed)``.
+They are not experiment files because the experiment runner (``evaluation.experiments``) tabulates per-episode
+scalar metrics paired across series, while these figures need the per-broadcast tick log binned into profiles,
+bursts per pop-up, correlations across seeds, and a path-by-path comparison of two solvers' allocations on one seed;
+expressing them there would mean new metric kinds in the runner for three figures.
 """
 
 from __future__ import annotations

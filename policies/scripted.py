@@ -107,7 +107,12 @@ class CBBAPolicy(CBGAPolicy):
     def start(self, env: Any, seed: int | None = None) -> None:
         super().start(env, seed)
         if self.env.config.task_mix is not None or (self.env.scenario.task_agents > 1).any():
-            raise ValueError("CBBA assigns single-agent tasks only (every L_j = 1); use CBGAPolicy for L_j > 1")
+            raise ValueError(f"{self.name} assigns single-agent tasks only (every L_j = 1); {self.multi_agent_hint}")
+
+    @property
+    def multi_agent_hint(self) -> str:
+        """What to use instead on multi-agent tasks (L_j > 1)."""
+        return "use CBGAPolicy for L_j > 1"
 
 
 class ACBBAPolicy(CBBAPolicy):
@@ -122,6 +127,12 @@ class ACBBAPolicy(CBBAPolicy):
     @property
     def env_overrides(self) -> dict[str, Any]:
         return {"consensus": "acbba"}
+
+    @property
+    def multi_agent_hint(self) -> str:
+        """Johnson's ACBBA is stated for single-agent tasks (§4.1); CBGA's merge runs per message (docs §9.6)."""
+        return ('CBGA and CBGABI run asynchronously with consensus="acbba" (e.g. make_policy("cbgabi") in an env '
+                'with consensus="acbba")')
 
 
 class RandomPolicy(Policy):

@@ -327,7 +327,7 @@ class AsyncProtocol(Protocol):
         quiet = (not ahead and not len(self.network.in_flight()) and not self.queue.shape[1]
                  and not self.outgoing[live].any() and not self.inbox[live].any()
                  and not (self.ready_at[live] != IDLE).any())
-        local = not ahead and bool(np.all(self.round - self.quiet_since[live] > self.cfg.separation_time))
+        local = not ahead and bool(np.all(self.agents_locally_converged[live]))
         c = self.counters
         if local and not self.local:
             c.local_tick = self.round
@@ -337,6 +337,19 @@ class AsyncProtocol(Protocol):
                 c.local_tick = int(self.quiet_since[live].max(initial=0)) + self.cfg.separation_time + 1
         self.quiet, self.local = self.quiet or quiet, self.local or local
         self.converged = self.local if self.cfg.local_termination else self.quiet
+
+    @property
+    def agents_locally_converged(self) -> np.ndarray:
+        """(N,) each live agent's own declaration (Johnson §4.1.3, separation time, l. 941–943): nothing relevant
+        reached it for more than ``separation_time`` ticks, after its confirmations (our rule). It knows nothing of
+        future events, so it may declare before a pop-up task and withdraw the declaration when one arrives."""
+        return (self.alive & (self.round - self.quiet_since > self.cfg.separation_time)
+                & (self.confirmed >= self.cfg.confirmation_count))
+
+    @property
+    def local_ticks(self) -> np.ndarray:
+        """(N,) the tick each agent declared itself locally converged, −1 while it has not."""
+        return np.where(self.agents_locally_converged, self.quiet_since + self.cfg.separation_time + 1, -1)
 
     @property
     def livelocked(self) -> bool:

@@ -380,10 +380,14 @@ def _check_asynchronous(cfg: TaskAllocConfig) -> None:
         pair = getattr(cfg, name)
         if len(pair) != 2:
             _fail(name, pair, "two tick counts [fewest, most]")
-    _check_number("message_ticks", cfg.message_ticks[0])
-    _check_number("message_ticks", cfg.message_ticks[1], minimum=cfg.message_ticks[0])
-    _check_positive_int("build_ticks", cfg.build_ticks[0], minimum=0)
-    _check_positive_int("build_ticks", cfg.build_ticks[1], minimum=cfg.build_ticks[0])
+    for bound in cfg.message_ticks:
+        _check_number("message_ticks", bound)
+    for bound in cfg.build_ticks:
+        _check_positive_int("build_ticks", bound, minimum=0)
+    for name in ("message_ticks", "build_ticks"):             # a range of processing times (Johnson §4.1.1)
+        low, high = getattr(cfg, name)
+        if high < low:
+            _fail(name, (low, high), "[fewest, most] with the upper bound >= the lower bound")
     _check_positive_int("separation_time", cfg.separation_time)
     if cfg.confirmations is not None:
         _check_positive_int("confirmations", cfg.confirmations, minimum=0)

@@ -340,10 +340,16 @@ class TaskAllocEnv(ParallelEnv):
         figures = {"score": ts.score, "valid_tasks": int(ts.valid.sum()), "conflicts": int(ts.conflicts.sum()),
                    "round": p.round, "messages": p.counters.messages, "data_items": p.counters.data_items,
                    "converged": p.converged}
+        asynchronous = self.config.asynchronous
+        if asynchronous:                                 # Johnson §4.1.3: each agent declares its own convergence
+            declared, declared_at = p.agents_locally_converged, p.local_ticks
         infos = {}
         for a in self.agents:
             info = dict(figures)
             info["passed"] = bool(self._passed[self.agent_index[a]])
+            if asynchronous:
+                info["locally_converged"] = bool(declared[self.agent_index[a]])
+                info["locally_converged_at"] = int(declared_at[self.agent_index[a]])
             info["invalid_action"] = a in flags          # the reason: env.unwrapped.invalid_action_reasons[a]
             if self.mask_in_infos:
                 info["action_mask"] = self._masks[self.agent_index[a]].copy()

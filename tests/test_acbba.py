@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import re
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
@@ -19,6 +20,8 @@ from taskalloc_env import TaskAllocEnv
 from taskalloc_env.async_consensus import compose
 from taskalloc_env.async_protocol import AsyncProtocol
 from taskalloc_env.cbba_table import NONE
+from taskalloc_env.config import TaskAllocConfig
+from taskalloc_env.errors import ConfigError
 from taskalloc_env.scenario import scenario_config
 from taskalloc_env.stamps import NEVER, stamp, tick_of
 
@@ -158,6 +161,74 @@ def test_evaluate_reports_global_and_local_convergence_and_their_times():
     local = rollout(TaskAllocEnv(n_agents=5, n_tasks=10, consensus="acbba", separation_time=10,
                                  termination="local", **DMG), make_policy("acbba"), seed=2)
     assert local.converged and local.locally_converged and local.counters.local_tick == local.counters.rounds
+
+
+def _declarations(env: TaskAllocEnv, policy: str, seed: int) -> list[tuple[int, dict[str, dict]]]:
+    """(tick, infos) after reset and after every step of an episode."""
+    p = make_policy(policy)
+    obs, infos = env.reset(seed=seed)
+    p.start(env, seed)
+    seen = [(env.protocol.round, infos)]
+    while env.agents:
+        obs, _, _, _, infos = env.step(p.act({a: obs[a] for a in env.agents}, infos))
+        seen.append((env.protocol.round, infos))
+    return seen
+
+
+def test_each_agent_declares_its_own_local_convergence_in_infos():
+    """Johnson §4.1.3 (separation time, l. 941–943): an agent declares itself converged after more than
+    ``separation_time`` ticks without relevant news; the run is locally converged at the tick the last one does.
+    Slow listeners (0.5–2 ticks per message) spread the agents' last news, so they declare at different ticks."""
+    env = TaskAllocEnv(n_agents=5, n_tasks=10, consensus="acbba", separation_time=10, termination="local",
+                       message_ticks=(0.5, 2.0), **DMG)
+    seen = _declarations(env, "acbba", seed=2)
+    declared_first: dict[str, int] = {}
+    for tick, infos in seen:
+        for a, info in infos.items():
+            at = info["locally_converged_at"]
+            assert info["locally_converged"] == (at >= 0) and at <= tick
+            if info["locally_converged"]:
+                declared_first.setdefault(a, tick)
+                assert tick - at >= 0 and at > env.config.separation_time
+    last_tick, last = seen[-1]
+    assert all(info["locally_converged"] for info in last.values())
+    assert max(info["locally_converged_at"] for info in last.values()) == env.protocol.counters.local_tick == last_tick
+    assert len(set(declared_first.values())) > 1                               # agents declare at their own ticks
+    before_last = seen[-2][1]
+    assert not all(info["locally_converged"] for info in before_last.values())
+
+
+def test_a_popup_task_withdraws_every_declaration_and_sync_infos_have_none():
+    """An agent does not know the future: it may declare before a pop-up, and the release is news to every agent."""
+    env = TaskAllocEnv(n_agents=4, n_tasks=8, consensus="acbba", separation_time=10, popup_tasks=1,
+                       popup_times=[150], **DMG)
+    seen = _declarations(env, "acbba", seed=0)
+    at = {tick: infos for tick, infos in seen}
+    assert all(info["locally_converged"] for info in at[149].values())
+    assert not any(info["locally_converged"] for info in at[150].values())
+    assert all(info["locally_converged"] for info in seen[-1][1].values()) and seen[-1][0] > 150
+    _, infos = TaskAllocEnv(n_agents=3, n_tasks=4, **DMG).reset(seed=0)
+    assert all("locally_converged" not in info for info in infos.values())
+
+
+# -- error messages ----------------------------------------------------------------------------------------------------
+def test_acbba_on_multi_agent_tasks_names_acbba_and_the_asynchronous_cbga():
+    env = TaskAllocEnv(n_agents=4, n_tasks=6, consensus="acbba", agents_per_task=2)
+    env.reset(seed=0)
+    with pytest.raises(ValueError) as err:
+        make_policy("acbba").start(env, 0)
+    text = str(err.value)
+    assert text.startswith("ACBBA assigns single-agent tasks only")
+    assert 'consensus="acbba"' in text and 'make_policy("cbgabi")' in text and "CBGA" in text
+    with pytest.raises(ValueError, match=r"^CBBA assigns single-agent tasks only .* use CBGAPolicy"):
+        make_policy("cbba").start(env, 0)
+
+
+@pytest.mark.parametrize("field, pair", [("message_ticks", (0.5, 0.1)), ("build_ticks", (3, 1))])
+def test_a_reversed_processing_time_range_says_the_upper_bound_must_not_be_below_the_lower(field, pair):
+    with pytest.raises(ConfigError, match=rf"'{field}': got {re.escape(repr(pair))}; allowed: .*upper bound >= "
+                                          r"the lower bound"):
+        TaskAllocConfig(consensus="acbba", **{field: pair})
 
 
 # -- pop-up tasks (Johnson §4.1.3, Figs 4-3 and 4-4) -------------------------------------------------------------------
