@@ -47,6 +47,16 @@ CHECKS = ("spaces", "return", "converged", "agreement", "conflict-free", "valid 
 POLICIES = ("random", "cbga", "cbga+tb", "cbga+tq", "cbgabi")
 
 
+def draw_equipment(rng: np.random.Generator, n_tasks: int) -> dict[str, Any]:
+    """Agent types A and B and a random task mix: tasks needing one agent per item (thesis §3.1.3) and plain ones."""
+    first = int(rng.integers(0, n_tasks + 1))
+    second = int(rng.integers(0, n_tasks - first + 1))
+    return {"agent_types": ["A", "B"],
+            "task_mix": [{"count": first, "equipment": list(rng.choice(["A", "B", "AB", "AA"]))},
+                         {"count": second, "equipment": list(rng.choice(["AB", "BB"]))},
+                         {"count": n_tasks - first - second, "agents": int(rng.integers(1, 3))}]}
+
+
 def draw_config(rng: np.random.Generator, extra: np.random.Generator) -> dict[str, Any]:
     """A random config over every option (small sizes, so that thousands of episodes run in minutes). Pop-up tasks
     and the asynchronous consensus come from ``extra``, a second stream, so the other options of a seed are drawn
@@ -57,12 +67,7 @@ def draw_config(rng: np.random.Generator, extra: np.random.Generator) -> dict[st
                           "window": float(rng.choice([2.0, 5.0, 10.0])), "duration": float(rng.choice([0.0, 5.0]))}
     kind = rng.choice(["plain", "plain", "equipment", "prerequisites"])
     if kind == "equipment":
-        kw["agent_types"] = ["A", "B"]
-        first = int(rng.integers(0, n_tasks + 1))
-        second = int(rng.integers(0, n_tasks - first + 1))
-        kw["task_mix"] = [{"count": first, "equipment": list(rng.choice(["A", "B", "AB", "AA"]))},
-                          {"count": second, "equipment": list(rng.choice(["AB", "BB"]))},
-                          {"count": n_tasks - first - second, "agents": int(rng.integers(1, 3))}]
+        kw.update(draw_equipment(rng, n_tasks))
     else:
         choices = [1, 2, 3, [1, 2], [1, 2, 3], [2, 3]]
         kw["agents_per_task"] = choices[int(rng.integers(len(choices)))]

@@ -215,6 +215,11 @@ def sweep_plot(path: Path, xs: Sequence[Any], series: Mapping[str, Sequence[Sequ
         ax.set_xticks(pos, [str(x) for x in xs], rotation=20, ha="right")
     ax.set_xlabel(xlabel)
     ax.set_ylabel(f"{METRIC_LABELS.get(metric, metric)} ({'share, 95 % CI' if share else 'mean ± sd'})")
+    _save_with_legend(fig, ax, path, title)
+
+
+def _save_with_legend(fig: Any, ax: Any, path: Path, title: str) -> None:
+    """Title, legend outside the axes on the right, grid; saved to ``path`` and closed."""
     ax.set_title(textwrap.fill(title, 70), fontsize=9)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     ax.grid(alpha=0.3)
@@ -246,13 +251,7 @@ def reference_plot(path: Path, xs: Sequence[Any], diffs: Mapping[str, Sequence[P
         ax.set_xticks(pos, [str(x) for x in xs], rotation=20, ha="right")
     ax.set_xlabel(xlabel)
     ax.set_ylabel(f"Δ {METRIC_LABELS.get(metric, metric)} vs {reference} (mean, 95 % CI)")
-    ax.set_title(textwrap.fill(title, 70), fontsize=9)
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save_with_legend(fig, ax, path, title)
 
 
 def heatmap_plot(path: Path, table: np.ndarray, rows: Sequence[Any], cols: Sequence[Any], row_label: str,

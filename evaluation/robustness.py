@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from evaluation.episodes import default_jobs
+from evaluation.fuzz import draw_equipment
 from evaluation.pool import parallel_map
 from evaluation.report import markdown_table
 from policies import make_policy, rollout
@@ -53,12 +54,7 @@ def draw_config(rng: np.random.Generator, single: bool, loss: float) -> dict[str
     if single:
         kw["agents_per_task"] = 1
     elif rng.random() < 0.25:          # equipment: a task needs one agent per item (thesis §3.1.3)
-        kw["agent_types"] = ["A", "B"]
-        first = int(rng.integers(0, n_tasks + 1))
-        second = int(rng.integers(0, n_tasks - first + 1))
-        kw["task_mix"] = [{"count": first, "equipment": list(rng.choice(["A", "B", "AB", "AA"]))},
-                          {"count": second, "equipment": list(rng.choice(["AB", "BB"]))},
-                          {"count": n_tasks - first - second, "agents": int(rng.integers(1, 3))}]
+        kw.update(draw_equipment(rng, n_tasks))
     else:
         mix = [v for v in MIXES[int(rng.integers(len(MIXES)))] if v <= n_agents]
         kw["agents_per_task"] = mix if len(mix) > 1 else mix[0]
