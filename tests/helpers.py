@@ -296,3 +296,25 @@ def check_converged_allocation(env: TaskAllocEnv, episode: Episode, *, full_comm
             assert st >= ready - 1e-9, f"agent {i} starts task {j} at {st} before its prerequisites allow ({ready})"
     for (i, j), count in episode.quits.items():
         assert count <= 1, f"agent {i} quit task {j} {count} times (thesis §5.2.2: once)"
+
+
+def draw_group_setup(draw: Callable) -> tuple[int, int, int, np.ndarray, np.ndarray, np.ndarray]:
+    """For the merge properties (a Hypothesis ``draw``): N agents, M multi-agent tasks, R receivers, L_j per task,
+    each agent's one equipment type (N, types) and each task's items (M, types), |te_j| = L_j or none."""
+    from hypothesis import strategies as st
+
+    n = draw(st.integers(3, 6))
+    m = draw(st.integers(1, 4))
+    r = draw(st.integers(1, 3))
+    required = np.array([draw(st.integers(2, n)) for _ in range(m)])
+    n_types = draw(st.integers(0, 2))
+    types = np.array([draw(st.integers(0, max(n_types - 1, 0))) for _ in range(n)])
+    agent_eq = np.zeros((n, n_types), dtype=bool)
+    if n_types:
+        agent_eq[np.arange(n), types] = True
+    task_eq = np.zeros((m, n_types), dtype=np.int64)
+    for j in range(m):
+        if n_types and draw(st.booleans()):
+            for _ in range(required[j]):
+                task_eq[j, draw(st.integers(0, n_types - 1))] += 1
+    return n, m, r, required, agent_eq, task_eq

@@ -10,6 +10,7 @@ equipment is still needed, otherwise displacing the (bid, id)-minimum same-equip
 from __future__ import annotations
 
 import numpy as np
+from helpers import draw_group_setup
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -178,20 +179,7 @@ def test_appendix_a2_merge_is_independent_of_sender_order():
 # -- properties ----------------------------------------------------------------------------------------------------
 @st.composite
 def merge_inputs(draw):
-    n = draw(st.integers(3, 6))
-    m = draw(st.integers(1, 4))
-    r = draw(st.integers(1, 3))
-    required = np.array([draw(st.integers(2, n)) for _ in range(m)])
-    n_types = draw(st.integers(0, 2))
-    types = np.array([draw(st.integers(0, max(n_types - 1, 0))) for _ in range(n)])
-    agent_eq = np.zeros((n, n_types), dtype=bool)
-    if n_types:
-        agent_eq[np.arange(n), types] = True
-    task_eq = np.zeros((m, n_types), dtype=np.int64)
-    for j in range(m):
-        if n_types and draw(st.booleans()):
-            for _ in range(required[j]):
-                task_eq[j, draw(st.integers(0, n_types - 1))] += 1
+    n, m, r, required, agent_eq, task_eq = draw_group_setup(draw)
     bid = st.sampled_from([0.0, 0.0, 10.0, 20.0, 30.0, 40.0])
 
     def table():

@@ -21,6 +21,7 @@ with times in place of per-agent timestamps.
 from __future__ import annotations
 
 import numpy as np
+from helpers import draw_group_setup
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -199,20 +200,7 @@ def test_equipment_no_slot_for_an_unneeded_type():
 @st.composite
 def stamped_inputs(draw):
     """R receivers' columns and their senders' columns with entry times in 0..3 (0 = ``NEVER``), capacity respected."""
-    n = draw(st.integers(3, 6))
-    m = draw(st.integers(1, 4))
-    r = draw(st.integers(1, 3))
-    required = np.array([draw(st.integers(2, n)) for _ in range(m)])
-    n_types = draw(st.integers(0, 2))
-    types = np.array([draw(st.integers(0, max(n_types - 1, 0))) for _ in range(n)])
-    agent_eq = np.zeros((n, n_types), dtype=bool)
-    if n_types:
-        agent_eq[np.arange(n), types] = True
-    task_eq = np.zeros((m, n_types), dtype=np.int64)
-    for j in range(m):
-        if n_types and draw(st.booleans()):
-            for _ in range(required[j]):
-                task_eq[j, draw(st.integers(0, n_types - 1))] += 1
+    n, m, r, required, agent_eq, task_eq = draw_group_setup(draw)
     bid = st.sampled_from([0.0, 0.0, 10.0, 20.0, 30.0, 40.0])
 
     def table() -> tuple[np.ndarray, np.ndarray]:
