@@ -254,6 +254,52 @@ def _lookup(count: int, ids: np.ndarray, values: np.ndarray, keys: np.ndarray, o
 
 
 @jit
+def _own_tasks(snap_bids: np.ndarray, single: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each sent table (stacked (q, k) as t = q · N + k): the multi-agent tasks its sender k is a member of."""
+    h, n, _, m = snap_bids.shape
+    count = np.zeros(h * n, dtype=np.int64)
+    tasks = np.empty((h * n, m), dtype=np.int64)
+    for q in range(h):
+        for k in range(n):
+            t = q * n + k
+            for j in range(m):
+                if not single[j] and snap_bids[q, k, k, j] > 0:
+                    tasks[t, count[t]] = j
+                    count[t] += 1
+    return count, tasks
+
+
+@jit
+def _columns_to_visit(receiver_row: np.ndarray, single: np.ndarray, sender_tasks: np.ndarray, sender_count: int,
+                      i: int, k: int, s_i: np.ndarray, s_k: np.ndarray, visit: np.ndarray) -> int:
+    """The columns a message from k to i can change, into ``visit``; returns how many.
+
+    A multi-agent column changes only through a member that i must trust from k (``_any_trusted``): k itself, or an
+    agent k heard of more recently than i. When k is the only such agent (on a connected network after the first
+    rounds, nearly always), only the columns where k is a member in i's table or in k's can change; every column
+    otherwise. Single-agent columns are always visited (the CBBA table decides them). Order does not matter: a
+    message's columns are merged independently."""
+    m = receiver_row.size
+    only_sender = True
+    for a in range(s_i.size):
+        if a != i and a != k and s_k[a] > s_i[a]:
+            only_sender = False
+            break
+    visits = 0
+    for j in range(m):
+        if not only_sender or single[j] or receiver_row[j] > 0:
+            visit[visits] = j
+            visits += 1
+    if only_sender:
+        for c in range(sender_count):
+            j = sender_tasks[c]
+            if receiver_row[j] <= 0:                    # not listed yet (k is no member in i's column)
+                visit[visits] = j
+                visits += 1
+    return visits
+
+
+@jit
 def exchange_all(bids: np.ndarray, winner: np.ndarray, stamps: np.ndarray, known: np.ndarray,
                  snap_bids: np.ndarray, snap_winner: np.ndarray, snap_winning: np.ndarray, snap_stamps: np.ndarray,
                  snap_known: np.ndarray, receiver: np.ndarray, sender: np.ndarray, slot: np.ndarray, now: float,
@@ -278,9 +324,11 @@ def exchange_all(bids: np.ndarray, winner: np.ndarray, stamps: np.ndarray, known
             if not single[j]:
                 content[i, j] = _lookup(count[i, j], ids[i, j], values[i, j], keys, owner, m, sent_count, sent_ids,
                                         sent_values)
+    own_count, own_tasks = _own_tasks(snap_bids, single)
     before_ids = np.empty(width, dtype=np.int64)
     before_values = np.empty(width)
     taken = np.zeros(width, dtype=np.bool_)
+    visit = np.empty(m, dtype=np.int64)
     s_i = np.empty(n)
     for d in range(receiver.size):
         i, k, q = receiver[d], sender[d], slot[d]
@@ -288,7 +336,9 @@ def exchange_all(bids: np.ndarray, winner: np.ndarray, stamps: np.ndarray, known
         s_i[:] = stamps[i]
         s_k = snap_stamps[q, k]
         changed = False
-        for j in range(m):
+        visits = _columns_to_visit(bids[i, k], single, own_tasks[t], own_count[t], i, k, s_i, s_k, visit)
+        for x in range(visits):
+            j = visit[x]
             if single[j]:
                 z_i = winner[i, j]
                 y_i = 0.0 if z_i == NONE else bids[i, z_i, j]
