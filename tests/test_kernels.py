@@ -180,3 +180,28 @@ def test_compiled_view_rows_equal_the_reference(case):
     kn.bundles[row] = [int(j) for j in np.flatnonzero(kn.bids[row, row] > 0)]
     kn.quit_blocked[row] = ~kn.quit_blocked[row]
     same(refresh_rows(first, [row], kn, *args, **options), bid_view(kn, *args, **options))
+
+
+@pytest.mark.parametrize("sample", range(2))
+def test_allocations_with_the_kernels_equal_those_with_the_references(sample, monkeypatch):
+    """End to end on fuzzed configs: the same paths, groups and counters; scores to the last bit of exp."""
+    from evaluation.fuzz import draw_config
+    from policies.fast import solve
+    from taskalloc_env import TaskAllocEnv, resolve_config
+
+    rng, checked = np.random.default_rng(100 + sample), 0
+    while checked < 30:
+        kw = draw_config(rng)
+        if resolve_config("default", **kw).faulty:
+            continue
+        name = ("cbga", "cbga+tb", "cbga+tq", "cbgabi", "cbba")[checked % 5]
+        env = TaskAllocEnv(**kw | ({"agents_per_task": 1} if name == "cbba" else {}), max_cycles=300)
+        env.reset(seed=checked)
+        compiled = solve(env.scenario, env.config, name, max_cycles=300)
+        with monkeypatch.context() as patch:
+            patch.setattr(kernels, "COMPILED", False)
+            reference = solve(env.scenario, env.config, name, max_cycles=300)
+        assert (compiled.paths, compiled.members, compiled.counters) == \
+            (reference.paths, reference.members, reference.counters), kw
+        assert np.isclose(compiled.score, reference.score, rtol=1e-12, atol=0)
+        checked += 1
