@@ -7,9 +7,12 @@ draws an instance (``create_agents_and_tasks`` with time windows, ``..._homogene
 fixed ``Scenario`` (same positions, speeds, windows, durations, rewards; agent and task types as equipment), scored
 as the reference scores it: reward · exp(−λ (start − window start)) with λ = 0.1, start times of planned tasks frozen
 (``marginal_gain="frozen"``), no travel cost (γ = 0). Both solve it with CBBA: the reference's ``CBBA.solve``, and
-this project's CBBA policy with the default consensus mode, both through the environment (``rollout``) and through
-the protocol directly (``policies.fast.solve``, the experiments' path). Runs alternate (reference, env, direct, …)
-and the medians are compared in the same run, so the ratios hold on a busy machine.
+this project's CBBA policy in each consensus mode (``sync``, the default, and ``every_step``), both through the
+environment (``rollout``) and through the protocol directly (``policies.fast.solve``, the experiments' path). Runs
+alternate (reference, env, direct, …) and the medians of CPU time (``time.process_time``) are compared in the same
+run, so the ratios hold on a busy machine. The allocations are not always equal: the reference breaks ties within
+ε and towards lower ids and prunes infeasible tasks its own way, so the table counts the instances whose paths are
+equal, those whose scores are equal, and the mean score ratio (ours / reference, both scored by this project's scorer).
 """
 
 from __future__ import annotations
@@ -28,13 +31,19 @@ from typing import Any
 
 import numpy as np
 
+from evaluation.report import markdown_table
 from policies import make_policy, rollout
-from policies.fast import solve
 from taskalloc_env import Agent, Scenario, Task, TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
 
+try:
+    from policies.fast import solve
+except ImportError:         # the tree before the speed work (for before/after figures): env rollouts only
+    solve = None
+
 SIZES = ((5, 10, True), (10, 50, True), (20, 100, True), (10, 50, False), (20, 100, False))
 TIME_DISCOUNT = 0.1
+MODES = ("sync", "every_step")
 
 
 def load_reference(root: Path) -> tuple[Any, Any, Any, dict]:
@@ -76,31 +85,62 @@ def to_scenario(agents: list, tasks: list, config: dict, windows: bool) -> Scena
 
 
 def measure(reference: tuple, n_agents: int, n_tasks: int, windows: bool, runs: int) -> dict[str, float]:
+    """Median CPU seconds of the reference and of ours (env rollout, direct solve) in each consensus mode, the number
+    of instances whose paths (and whose scores) equal the reference's, and the mean score ratio, per mode."""
     cbba_class, world_info, helpers, config = reference
-    times: dict[str, list[float]] = {"reference": [], "env": [], "direct": []}
-    scores: dict[str, list[float]] = {"reference": [], "env": []}
+    times: dict[str, list[float]] = {"reference": []}
+    out: dict[str, float] = {}
     policy = make_policy("cbba")
     for seed in range(runs):
         world, agents, tasks = reference_instance(helpers, world_info, config, n_agents, n_tasks, windows, seed)
         scenario = to_scenario(agents, tasks, config, windows)
-        env = TaskAllocEnv(scenario=scenario, marginal_gain="frozen")
         t0 = time.process_time()
         with contextlib.redirect_stdout(io.StringIO()):
             solver = cbba_class(config)
             solver.solve(agents, tasks, world, n_tasks, time_window_flag=windows)
         times["reference"].append(time.process_time() - t0)
-        t0 = time.process_time()
-        allocation = rollout(env, policy, seed=0)
-        times["env"].append(time.process_time() - t0)
-        t0 = time.process_time()
-        direct = solve(scenario, env.config, "cbba")
-        times["direct"].append(time.process_time() - t0)
-        assert direct == allocation, "the direct path must reach the env's allocation"
-        scores["env"].append(allocation.score)
-        scores["reference"].append(reference_score(solver, scenario))
-    out = {k: statistics.median(v) for k, v in times.items()}
-    out["score_ratio"] = float(np.mean(scores["env"]) / np.mean(scores["reference"]))
-    return out
+        ref_paths = tuple(tuple(int(j) for j in path if j >= 0) for path in solver.path_list)
+        ref_score = reference_score(solver, scenario)
+        for mode in MODES:      # interleaved with the reference: a change of load hits every column alike
+            env = TaskAllocEnv(scenario=scenario, marginal_gain="frozen", consensus=mode)
+            t0 = time.process_time()
+            allocation = rollout(env, policy, seed=0)
+            times.setdefault(f"{mode} env", []).append(time.process_time() - t0)
+            if solve is not None:
+                t0 = time.process_time()
+                direct = solve(scenario, env.config, "cbba")
+                times.setdefault(f"{mode} direct", []).append(time.process_time() - t0)
+                assert direct == allocation, "the direct path must reach the env's allocation"
+            out[f"{mode} equal"] = out.get(f"{mode} equal", 0) + (allocation.paths == ref_paths)
+            out[f"{mode} same score"] = out.get(f"{mode} same score", 0) + bool(np.isclose(allocation.score, ref_score))
+            out[f"{mode} score"] = out.get(f"{mode} score", 0.0) + allocation.score / ref_score / runs
+    return out | {k: statistics.median(v) for k, v in times.items()}
+
+
+def reference_table(reference: tuple, sizes: Sequence[tuple[int, int, bool]], runs: int) -> str:
+    """The side-by-side table in markdown: CPU seconds (medians over ``runs`` instances), ratios reference / ours,
+    instances whose paths (and whose scores) equal the reference's, mean score ratio ours / reference."""
+    def ratio(r: dict[str, float], key: str) -> str:
+        return f"{r['reference'] / r[key]:.1f}×" if key in r else "–"
+
+    def secs(r: dict[str, float], key: str) -> str:
+        return f"{r[key]:.4f}" if key in r else "–"
+
+    measure(reference, 5, 10, True, 1)         # warm-up: imports, compiled kernels, caches
+    body = []
+    for n, m, windows in sizes:
+        r = measure(reference, n, m, windows, runs)
+        body.append([f"{n} × {m}{', windows' if windows else ''}", f"{r['reference']:.4f}",
+                     *(secs(r, f"{mode} {path}") for mode in MODES for path in ("env", "direct")),
+                     *(ratio(r, f"{mode} {path}") for mode in MODES for path in ("env", "direct")),
+                     " / ".join(f"{int(r[f'{mode} equal'])}/{runs}" for mode in MODES),
+                     " / ".join(f"{int(r[f'{mode} same score'])}/{runs}" for mode in MODES),
+                     " / ".join(f"{r[f'{mode} score']:.3f}" for mode in MODES)])
+    header = ["size (agents × tasks)", "CBBA-Python s",
+              *(f"{mode} {path} s" for mode in MODES for path in ("env", "direct")),
+              *(f"ratio {mode} {path}" for mode in MODES for path in ("env", "direct")),
+              "equal paths sync / every_step", "equal score sync / every_step", "score ratio sync / every_step"]
+    return markdown_table(header, body)
 
 
 def reference_score(solver: Any, scenario: Scenario) -> float:
@@ -124,14 +164,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     sizes = SIZES if args.sizes == "all" else [
         (int(s.rstrip("w").split("x")[0]), int(s.rstrip("w").split("x")[1]), s.endswith("w"))
         for s in args.sizes.split(",")]
-    print(f"{'size':>14} {'reference':>10} {'env':>9} {'direct':>9} {'ref/env':>8} {'ref/direct':>10} "
-          f"{'score ratio':>11}")
-    for n, m, windows in sizes:
-        r = measure(reference, n, m, windows, args.runs)
-        label = f"{n} × {m}{', windows' if windows else ''}"
-        print(f"{label:>14} {r['reference']:9.3f}s {r['env']:8.3f}s {r['direct']:8.3f}s "
-              f"{r['reference'] / r['env']:7.1f}× {r['reference'] / r['direct']:9.1f}× {r['score_ratio']:11.3f}",
-              flush=True)
+    print(reference_table(reference, sizes, args.runs), flush=True)
     return 0
 
 

@@ -195,3 +195,29 @@ def test_the_references_can_be_chosen_and_a_typo_is_refused():
     assert compiled("reference").stdout.strip() == "False"
     bad = compiled("fast")
     assert bad.returncode != 0 and "TASKALLOC_KERNELS='fast' is not one of" in bad.stderr
+
+
+@pytest.mark.parametrize("sample", range(2))
+def test_allocations_with_the_kernels_equal_those_with_the_references(sample, monkeypatch):
+    """End to end on fuzzed configs: the same paths, groups and counters; scores to the last bit of exp."""
+    from evaluation.fuzz import draw_config
+    from policies.fast import solve
+    from taskalloc_env import TaskAllocEnv, resolve_config
+
+    rng, extra, checked = np.random.default_rng(100 + sample), np.random.default_rng([100 + sample, 2]), 0
+    while checked < 30:
+        kw = draw_config(rng, extra)
+        cfg = resolve_config("default", **kw)
+        if cfg.stochastic or cfg.asynchronous:      # the direct solver's domain (tests/test_fast.py)
+            continue
+        name = ("cbga", "cbga+tb", "cbga+tq", "cbgabi", "cbba")[checked % 5]
+        env = TaskAllocEnv(**kw | ({"agents_per_task": 1} if name == "cbba" else {}), max_cycles=300)
+        env.reset(seed=checked)
+        compiled = solve(env.scenario, env.config, name, max_cycles=300)
+        with monkeypatch.context() as patch:
+            patch.setattr(kernels, "COMPILED", False)
+            reference = solve(env.scenario, env.config, name, max_cycles=300)
+        assert (compiled.paths, compiled.members, compiled.counters) == \
+            (reference.paths, reference.members, reference.counters), kw
+        assert np.isclose(compiled.score, reference.score, rtol=1e-12, atol=0)
+        checked += 1
