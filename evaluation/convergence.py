@@ -27,6 +27,7 @@ from taskalloc_env import resolve_config
 from taskalloc_env.errors import ConfigError, run_cli
 
 DEFAULT_ROWS = [("leg", gain, True) for gain in ("rescore", "frozen")]
+COST_ROWS = [(cost, gain, True) for cost, gain in itertools.product(("leg", "from_start"), ("rescore", "frozen"))]
 ALL_ROWS = [(cost, gain, warp) for cost, gain, warp in itertools.product(("leg", "from_start"), ("rescore", "frozen"),
                                                                           (True, False))]
 
@@ -61,6 +62,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--all", action="store_true",
                         help="every combination of distance_cost, marginal_gain and bid_warping (default: the "
                              "defaults' leg + warping under both marginal-gain modes)")
+    parser.add_argument("--costs", action="store_true",
+                        help="both distance costs (leg, from_start) under both marginal-gain modes, with warping: "
+                             "the score both ways (the rows without warping run to the round bound, so --all is slow)")
     parser.add_argument("--policies", default="cbga,cbgabi", help="comma-separated policies (default cbga,cbgabi)")
     parser.add_argument("--levels", default="1,2,4", help="comma-separated L_j values (default 1,2,4)")
     parser.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes (default: every core)")
@@ -69,7 +73,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.seeds < 1:
         raise ConfigError(f"--seeds: got {args.seeds}; allowed: an integer >= 1")
     levels = [int(v) for v in args.levels.split(",")]
-    text = table(ALL_ROWS if args.all else DEFAULT_ROWS, args.policies.split(","), levels, args.seeds, args.jobs)
+    rows = ALL_ROWS if args.all else COST_ROWS if args.costs else DEFAULT_ROWS
+    text = table(rows, args.policies.split(","), levels, args.seeds, args.jobs)
     print(text)
     if args.out:
         command = "python -m evaluation.convergence " + " ".join(argv if argv is not None else [])
