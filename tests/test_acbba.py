@@ -389,3 +389,30 @@ def test_asynchronous_episodes_replay_byte_identically_across_processes():
 def test_never_is_before_every_stamp_and_fresh_tables_hold_no_time():
     p = AsyncProtocol(build([agent(0)], [task(1)]), scenario_config(build([agent(0)], [task(1)]), consensus="acbba"))
     assert (p.times.task == NEVER).all() and (p.times.entry == NEVER).all() and stamp(0, 0) > NEVER
+
+
+# -- fuzz regressions (evaluation.fuzz.cases(1500, 2026)) --------------------------------------------------------------
+LIVELOCK_1832714987 = {"n_agents": 4, "n_tasks": 9, "start_time_range": [0.0, 60.0], "agents_per_task": 1,
+                       "consensus": "acbba", "acbba_row11": "trust_later", "acbba_outbid_time": "bump",
+                       "max_rounds": 150}
+
+
+def test_the_outbid_bump_can_livelock_a_complete_graph_and_the_detector_sees_the_cycle():
+    """Fuzz seed 1832714987, minimised (single-agent tasks, complete graph, every option at its default but two):
+    agent 2's withdrawn bid 97.16 on task 7 outbids the fresh bids of agents 0 and 3 (row 17), whose `bump` (†,
+    acbba_outbid_time) re-times it past agent 2's own later record (79.94); row 11's trust_later keeps that lower,
+    later record alive, so 0 and 3 bid again. The tables cycle with period 5 ticks while the bundles move through
+    the same few states: the documented phantom of the bump (docs/decisions.md), recognised by ``livelocked`` (no
+    new bundle state for the later half) and accepted by the fuzz. Either option at its default converges."""
+    from evaluation import fuzz
+
+    seed = 1832714987
+    env = TaskAllocEnv(**LIVELOCK_1832714987)
+    alloc = _drive(env, "acbba", seed)
+    p = env.protocol
+    assert p.graph.adjacency.sum() == 4 * 3
+    assert not alloc.converged and p.round == 150 and p.livelocked
+    assert fuzz.run_case((LIVELOCK_1832714987, "acbba", seed))["converged"] is True
+    for option in ({"acbba_row11": "update"}, {"acbba_outbid_time": "sender"}):
+        env = TaskAllocEnv(**{**LIVELOCK_1832714987, **option})
+        assert _drive(env, "acbba", seed).converged and not env.protocol.livelocked
