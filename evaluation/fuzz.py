@@ -12,11 +12,13 @@ ACBBA where every L_j = 1) and a seed, runs it and checks:
   policy takes is allowed;
 * ``return``: the episode return × reward_scale equals ``evaluate().score``;
 * ``converged``: the episode ends by convergence, not by the round bound (lost and delayed messages and failing
-  agents included); under ``acbba`` on a network that is not fully connected, the documented livelock of Johnson's
-  row 15 (docs/decisions.md) is the one exception, recognised by a task whose time keeps being bumped while no bundle
-  changes;
+  agents included); under ``acbba`` the documented livelocks (docs/decisions.md "livelock") are the exceptions,
+  recognised by ``AsyncProtocol.livelocked`` (agents keep talking while the bundles reach no new state): Johnson's
+  row 15 on a network that is not fully connected, and a stale bid re-timed by ``acbba_outbid_time = bump`` on any;
 * ``agreement`` and ``conflict-free``: at convergence on a connected network every live agent holds the same table
-  and no task has more than L_j members (thesis §3.2: the consensus reaches a conflict-free allocation);
+  and no task has more than L_j members (thesis §3.2: the consensus reaches a conflict-free allocation); under
+  ``acbba``, which never resends, not applicable when two agents disagree and the last message between them was
+  lost (docs/decisions.md "lost messages");
 * ``valid groups``: every valid task has exactly L_j members whose equipment covers it, and its prerequisites are
   valid;
 * ``determinism``: the same (config, policy, seed) run again gives byte-identical observations, rewards and infos.
@@ -133,6 +135,7 @@ def _episode(kw: dict[str, Any], policy: Any, seed: int, verdict: dict[str, Any]
     env = TaskAllocEnv(**{**kw, **policy.env_overrides}, reward_scale=10.0, invalid_action="raise")
     digest = hashlib.sha256()
     obs, infos = env.reset(seed=seed)
+    last_lost = _record_losses(env)
     policy.start(env, seed)
     space = env.observation_space(env.possible_agents[0])
     spaces_ok, total = True, 0.0
@@ -153,14 +156,46 @@ def _episode(kw: dict[str, Any], policy: Any, seed: int, verdict: dict[str, Any]
         live = protocol.alive
         connected = bool((protocol.live_graph.component[live] == np.flatnonzero(live)[0]).all())
         complete = bool(protocol.graph.adjacency.sum() == len(live) * (len(live) - 1))
-        livelock = env.config.asynchronous and not complete and protocol.livelocked
+        # the documented livelocks (docs/decisions.md "livelock"): row 15's loop on networks that are not fully
+        # connected, and a stale bid re-timed by the outbid bump (acbba_outbid_time = bump) on any network
+        documented = not complete or env.config.acbba_outbid_time == "bump"
+        livelock = env.config.asynchronous and documented and protocol.livelocked
         verdict.update({"spaces": spaces_ok, "return": abs(total * env.reward_scale - allocation.score) < 1e-6,
                         "converged": allocation.converged or livelock})
+        # ACBBA never resends: a disagreement is explained when the last message between the two agents was lost
+        # (its broadcast and every confirmation, docs/decisions.md "lost messages"); otherwise it is a bug
         at_rest = allocation.globally_converged and connected
+        if at_rest and env.config.asynchronous and _lost_disagreement(protocol, last_lost):
+            at_rest = False
         verdict["agreement"] = allocation.agreement if at_rest else None
         verdict["conflict-free"] = not allocation.conflicts if at_rest else None
         verdict["valid groups"] = _valid_groups(env, allocation)
     return digest.hexdigest()
+
+
+def _record_losses(env: TaskAllocEnv) -> np.ndarray:
+    """(N, N) bool, filled as the episode runs: whether the last message on each link (sender, receiver) was lost.
+    Wraps the loss model's draw, so the episode is unchanged."""
+    loss = env.protocol.network.loss
+    n = env.scenario.n_agents
+    last = np.zeros((n, n), dtype=bool)
+    draw = loss.lost
+
+    def lost(sender: np.ndarray, receiver: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        out = draw(sender, receiver, rng)
+        last[sender, receiver] = out
+        return out
+
+    loss.lost = lost
+    return last
+
+
+def _lost_disagreement(protocol: Any, last_lost: np.ndarray) -> bool:
+    """Two live agents hold different tables and the last message from one of them to the other was lost."""
+    bids = protocol.knowledge.bids
+    live = np.flatnonzero(protocol.alive)
+    return any((last_lost[i, k] or last_lost[k, i]) and not np.array_equal(bids[i], bids[k])
+               for i in live for k in live if i < k)
 
 
 def _valid_groups(env: TaskAllocEnv, allocation: Any) -> bool:

@@ -87,8 +87,9 @@ class AsyncProtocol(Protocol):
         self.broadcast_log: list[tuple[int, int, int]] = []   # (tick, sender, data items) of every broadcast
         self.quiet = False
         self.local = False
-        self.bundle_tick = 0                                  # the last tick any bundle changed
+        self.bundle_tick = 0                                  # the last tick the bundles reached a new state
         self._bundles_seen: list[list[int]] = []
+        self._bundle_states: set[tuple[tuple[int, ...], ...]] = set()   # every state of the bundles so far
         self.inbox[:] = True                                  # the initial tasks enter every listener at tick 0
         self._schedule_builds()
 
@@ -186,7 +187,11 @@ class AsyncProtocol(Protocol):
         if not np.array_equal(kn.bids, before) or kn.bundles != bundles_before:
             c.rounds_to_agreement, c.messages_to_agreement = now, c.messages
         if kn.bundles != self._bundles_seen:
-            self.bundle_tick, self._bundles_seen = now, [list(b) for b in kn.bundles]
+            self._bundles_seen = [list(b) for b in kn.bundles]
+            state = tuple(tuple(b) for b in kn.bundles)
+            if state not in self._bundle_states:      # a cycle through known states is no progress (livelock)
+                self._bundle_states.add(state)
+                self.bundle_tick = now
         self._check_convergence()
         self._touch()
 
@@ -353,9 +358,10 @@ class AsyncProtocol(Protocol):
 
     @property
     def livelocked(self) -> bool:
-        """Not converged, and for the later half of the run agents kept broadcasting while no bundle changed: the
-        signature of the row-15 loop and of stale bids refreshed against their owner's withdrawal (note §8.22;
-        docs/decisions.md)."""
+        """Not converged, and for the later half of the run agents kept broadcasting while the bundles reached no
+        state they had not held before (unchanged, or cycling through known states): the signature of the row-15
+        loop and of stale bids refreshed against their owner's withdrawal, whose bidders keep bidding and losing
+        (note §8.22; docs/decisions.md)."""
         talking = any(tick > self.bundle_tick for tick, _, _ in self.broadcast_log)
         return not self.converged and talking and self.round - self.bundle_tick > self.round // 2
 

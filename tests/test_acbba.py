@@ -389,3 +389,69 @@ def test_asynchronous_episodes_replay_byte_identically_across_processes():
 def test_never_is_before_every_stamp_and_fresh_tables_hold_no_time():
     p = AsyncProtocol(build([agent(0)], [task(1)]), scenario_config(build([agent(0)], [task(1)]), consensus="acbba"))
     assert (p.times.task == NEVER).all() and (p.times.entry == NEVER).all() and stamp(0, 0) > NEVER
+
+
+# -- fuzz regressions (evaluation.fuzz.cases(1500, 2026)) --------------------------------------------------------------
+FUZZ_1262656425 = {
+    "n_agents": 2, "n_tasks": 3, "start_time_range": [0.0, 60.0], "window": 10.0, "duration": 0.0,
+    "agents_per_task": [1, 2], "prerequisites": {"chains": 1, "length": 3, "followup_window": True},
+    "prereq_mode": "all_have_bid", "prereq_timing": "earliest", "marginal_gain": "rescore", "reward_split": "per_agent",
+    "release_order": "path", "cbba_table": "canonical", "consensus": "acbba", "reset_on": "additions",
+    "quit_block": "none", "conflict_policy": "first_L_paid", "distance_cost": "from_start", "message_ticks": [0.1, 0.4],
+    "build_ticks": [1, 3], "separation_time": 5, "termination": "local", "acbba_row11": "update",
+    "acbba_row15": "leave_bump", "acbba_time_refresh": "epsilon", "acbba_ties": "lowest_id",
+    "acbba_equal_bids": "leave", "acbba_outbid_time": "bump", "acbba_row20_guard": True, "acbba_row28_guard": True,
+    "message_loss": 0.0, "max_delay": 0, "loss_model": "gilbert_elliott"}
+
+
+def test_a_disagreement_at_rest_comes_only_from_a_link_that_lost_every_message():
+    """Fuzz seed 1262656425 (cbga+tb): message_loss 0, but the Gilbert–Elliott link 0 → 1 enters its bad state
+    (burst_loss 1) and loses all five of agent 0's broadcasts, its bid on task 1, its answer and both confirmations;
+    agent 1 keeps its own older, lower bid. ACBBA never resends (docs/decisions.md "lost messages"), so the fuzz
+    excuses a disagreement only when the last message between the two agents was lost; without the bad state the
+    same run agrees."""
+    from evaluation import fuzz
+
+    case = (FUZZ_1262656425, "cbga+tb", 1262656425)
+    verdict = fuzz.run_case(case)
+    assert verdict["agreement"] is None and verdict["conflict-free"] is None
+    assert all(verdict[c] for c in ("spaces", "return", "converged", "valid groups", "determinism"))
+    for burst_loss in (1.0, 0.0):
+        policy = make_policy("cbga+tb")
+        env = TaskAllocEnv(**{**FUZZ_1262656425, "burst_loss": burst_loss, **policy.env_overrides})
+        obs, infos = env.reset(seed=1262656425)
+        last_lost = fuzz._record_losses(env)
+        policy.start(env, 1262656425)
+        while env.agents:
+            obs, _, _, _, infos = env.step(policy.act({a: obs[a] for a in env.agents}, infos))
+        alloc = env.evaluate()
+        assert alloc.globally_converged
+        assert alloc.agreement is (burst_loss == 0.0)
+        assert bool(last_lost[0, 1]) is (burst_loss == 1.0)
+        assert fuzz._lost_disagreement(env.protocol, last_lost) is (burst_loss == 1.0)
+
+
+LIVELOCK_1832714987 = {"n_agents": 4, "n_tasks": 9, "start_time_range": [0.0, 60.0], "agents_per_task": 1,
+                       "consensus": "acbba", "acbba_row11": "trust_later", "acbba_outbid_time": "bump",
+                       "max_rounds": 150}
+
+
+def test_the_outbid_bump_can_livelock_a_complete_graph_and_the_detector_sees_the_cycle():
+    """Fuzz seed 1832714987, minimised (single-agent tasks, complete graph, every option at its default but two):
+    agent 2's withdrawn bid 97.16 on task 7 outbids the fresh bids of agents 0 and 3 (row 17), whose `bump` (†,
+    acbba_outbid_time) re-times it past agent 2's own later record (79.94); row 11's trust_later keeps that lower,
+    later record alive, so 0 and 3 bid again. The tables cycle with period 5 ticks while the bundles move through
+    the same few states: the documented phantom of the bump (docs/decisions.md), recognised by ``livelocked`` (no
+    new bundle state for the later half) and accepted by the fuzz. Either option at its default converges."""
+    from evaluation import fuzz
+
+    seed = 1832714987
+    env = TaskAllocEnv(**LIVELOCK_1832714987)
+    alloc = _drive(env, "acbba", seed)
+    p = env.protocol
+    assert p.graph.adjacency.sum() == 4 * 3
+    assert not alloc.converged and p.round == 150 and p.livelocked
+    assert fuzz.run_case((LIVELOCK_1832714987, "acbba", seed))["converged"] is True
+    for option in ({"acbba_row11": "update"}, {"acbba_outbid_time": "sender"}):
+        env = TaskAllocEnv(**{**LIVELOCK_1832714987, **option})
+        assert _drive(env, "acbba", seed).converged and not env.protocol.livelocked
