@@ -94,12 +94,17 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, float | str]]:
     print(f"load average before: {os.getloadavg()[0]:.2f}  (cores: {os.cpu_count()})", flush=True)
     results = []
     for label, run in cases:
+        before = os.times()
         with tempfile.TemporaryDirectory() as out:
             measured = run(out)
+        after = os.times()
+        cpu = sum(after[:4]) - sum(before[:4])      # user + system, this process and its waited-for children
         rate = measured["agent_steps"] / measured["seconds"]
-        results.append({"algorithm": label, **measured, "agent_steps_per_s": rate})
+        results.append({"algorithm": label, **measured, "agent_steps_per_s": rate, "cpu_seconds": cpu,
+                        "agent_steps_per_cpu_s": measured["agent_steps"] / cpu})
         print(f"{label:<40} {measured['agent_steps']:>8} agent steps {measured['seconds']:>8.1f} s "
-              f"{rate:>8.0f} agent steps/s {rate / AGENTS:>7.0f} env steps/s", flush=True)
+              f"{rate:>8.0f} agent steps/s {rate / AGENTS:>7.0f} env steps/s  (whole call: {cpu:.1f} CPU s, "
+              f"{measured['agent_steps'] / cpu:.0f} agent steps per CPU s)", flush=True)
     print(f"load average after: {os.getloadavg()[0]:.2f}")
     return results
 

@@ -72,7 +72,7 @@ class Config:
 
 SB3 = Config("SB3 MaskablePPO, pooling, local critic", "train_small", {0: "train_small"})
 POOLING = Config("MAPPO, pooling actor, state critic", "mappo_small_pooling")
-ATTENTION = Config("MAPPO, attention actor, state critic", "mappo_small")
+ATTENTION = Config("MAPPO, attention actor, state critic", "mappo_small", {0: "mappo_small"})
 MIXTURE = Config("MAPPO attention, curriculum 4×8 → 10×20", "mappo_mixture")
 LOSS = Config("MAPPO attention, trained under 20 % loss", "mappo_loss")
 
@@ -206,7 +206,8 @@ def heldout_table(data: Mapping[str, Any]) -> str:
     cbgabi, sgama = ref[NAMES["cbgabi"]], ref.get(NAMES["sgama"])
     opt = ref.get(NAMES["exact"])
     head = ["policy", "seeds", "score", "% of CBGABI", "% of optimum", "Δ vs CBGABI per seed (p)",
-            "wins vs CBGABI where they differ", "Δ vs SGAMA per seed (p)", "rounds", "messages"]
+            "wins vs CBGABI where they differ", "Δ vs SGAMA per seed (p)"] + \
+        ([] if opt is None else ["Δ vs optimum per seed (p)"]) + ["rounds", "messages"]
     body = []
     for r in rows:
         if r["kind"] == "learned":
@@ -219,7 +220,7 @@ def heldout_table(data: Mapping[str, Any]) -> str:
                      "–" if opt is None else f"{100 * s.mean() / opt.mean():.1f} %",
                      "–" if r["label"] == NAMES["cbgabi"] else f"{pc.mean_diff:+.1f} ({format_p(pc.p_t)})",
                      "–" if r["label"] == NAMES["cbgabi"] else wins_where_different(s, cbgabi),
-                     vs_sgama, *_protocol(r)])
+                     vs_sgama, *_versus(s, opt, r["label"] == NAMES["exact"]), *_protocol(r)])
     for label in dict.fromkeys(r["label"] for r in rows if r["kind"] == "learned"):
         runs = [r for r in rows if r["label"] == label]
         means = [float(np.mean(r["score"])) for r in runs]
@@ -232,10 +233,20 @@ def heldout_table(data: Mapping[str, Any]) -> str:
                      "; ".join(wins_where_different(s, cbgabi) for s in scores),
                      "–" if sgama is None else "; ".join(f"{paired(s, sgama).mean_diff:+.1f} "
                                                           f"({format_p(paired(s, sgama).p_t)})" for s in scores),
-                     *_protocol_mean(runs)])
+                     *([] if opt is None else ["; ".join(_versus(s, opt)[0] for s in scores)]), *_protocol_mean(runs)])
     seeds = data["seeds"]
     return (f"Held-out seeds {seeds[0]}–{seeds[-1]} ({len(seeds)} instances, the same for every row).\n\n"
             + markdown_table(head, body, align="lr" + "r" * (len(head) - 2)))
+
+
+def _versus(s: np.ndarray, opt: np.ndarray | None, itself: bool = False) -> list[str]:
+    """The paired difference with the exact optimum and its p-value (nothing when there is no optimum)."""
+    if opt is None:
+        return []
+    if itself:
+        return ["–"]
+    p = paired(s, opt)
+    return [f"{p.mean_diff:+.1f} ({format_p(p.p_t)})"]
 
 
 def _protocol(row: Mapping[str, Any]) -> list[str]:
@@ -262,10 +273,14 @@ def read_eval(path: Path) -> dict[str, list[tuple[int, float]]]:
 
 def plot_curves(out: Path, runs_dir: Path, configs: Sequence[Config]) -> None:
     """Validation score / CBGABI's against agent steps: mean over seeds and the 95 % interval across seeds."""
-    entries = ("train_small", "6x12", "default", "train_small_loss20")
-    fig, axes = plt.subplots(1, len(entries), figsize=(19, 4.2), sharey=False)
+    every = {config.name: [read_eval(p) for p in sorted((runs_dir / config.name).glob("seed*/eval.csv"))]
+             for config in configs}
+    entries = [e for e in ("train_small", "6x12", "default", "train_small_loss20")
+               if any(e in c for curves in every.values() for c in curves)] or ["train_small"]
+    fig, axes = plt.subplots(1, len(entries), figsize=(1 + 4.6 * len(entries), 4.2), sharey=False, squeeze=False)
+    axes = axes[0]
     for config in configs:
-        curves = [read_eval(p) for p in sorted((runs_dir / config.name).glob("seed*/eval.csv"))]
+        curves = every[config.name]
         for ax, entry in zip(axes, entries):
             per_seed = [c[entry] for c in curves if entry in c]
             if len(per_seed) < 1:
