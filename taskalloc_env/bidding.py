@@ -165,6 +165,14 @@ ROW_FIELDS = ("bid", "outbid", "eligible", "prereqs_met", "members", "group_tota
               "displaced_bid", "in_bundle")
 
 
+@functools.lru_cache(maxsize=8)
+def _everyone_known(n: int, m: int) -> np.ndarray:
+    """The (N, M) capacity mask when every agent is known from the start (read-only, shared)."""
+    known = np.ones((n, m), dtype=bool)
+    known.setflags(write=False)
+    return known
+
+
 def refresh_rows(previous: BidView | None, rows: Sequence[int], knowledge: LocalKnowledge, scenario: Scenario,
                  equipment: Equipment, equipment_match: np.ndarray, gain: np.ndarray, slot: np.ndarray, *,
                  prereq_mode: str, require_known_capacity: bool, max_bundle: int, fillable: np.ndarray,
@@ -188,7 +196,7 @@ def refresh_rows(previous: BidView | None, rows: Sequence[int], knowledge: Local
     else:
         arrays = {name: getattr(previous, name) for name in ROW_FIELDS}
     capacity = (known_capacity(knowledge, scenario, equipment, equipment_match) if require_known_capacity
-                else np.ones((n, m), dtype=bool))
+                else _everyone_known(n, m))
     bid_rows(np.asarray(rows, dtype=np.int64), knowledge.bids, knowledge.winner, knowledge.single, gain,
              knowledge.quit_blocked, np.array([len(b) for b in knowledge.bundles], dtype=np.int64), equipment_match,
              fillable, capacity, scenario.task_agents.astype(np.int64), equipment.restricted, equipment.required,

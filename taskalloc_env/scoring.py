@@ -147,9 +147,9 @@ class ScoringModel:
         """``kernels.plan.plan_paths`` on padded paths: the timing, with c_ij and n_ij written to ``rows``."""
         s = self.scenario
         agents = np.asarray(agents, dtype=np.int64)
-        padded, lengths, _ = _pad(paths)
+        padded, lengths = _padded(paths)
         count, width = padded.shape
-        arrival, start, finish, reward, cost = (np.zeros((count, width)) for _ in range(5))
+        arrival, start, finish, reward, cost = np.zeros((5, count, width))      # one allocation for the five
         feasible = np.ones(count, dtype=bool)
         plan_paths(padded, lengths, self.speed[agents], self.dist_agent_task[agents], self.dist_task_task,
                    self.earliest, self.deadline, self.doable, s.task_duration, s.task_start, self.pay, self.lam,
@@ -281,15 +281,19 @@ class ScoringModel:
         return fits, loss
 
 
-def _pad(paths: Sequence[Sequence[int]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Paths as a zero-padded (A, P) array, their lengths (A,) and the (A, P) mask of real entries."""
+def _padded(paths: Sequence[Sequence[int]]) -> tuple[np.ndarray, np.ndarray]:
+    """Paths as a zero-padded (A, P) array and their lengths (A,)."""
     lengths = np.array([len(p) for p in paths], dtype=np.int64)
-    width = int(lengths.max(initial=0))
-    padded = np.zeros((len(paths), width), dtype=np.int64)
-    present = np.arange(width)[None, :] < lengths[:, None]
+    padded = np.zeros((len(paths), int(lengths.max(initial=0))), dtype=np.int64)
     for a, path in enumerate(paths):
-        padded[a, : lengths[a]] = path
-    return padded, lengths, present
+        padded[a, : len(path)] = path
+    return padded, lengths
+
+
+def _pad(paths: Sequence[Sequence[int]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``_padded`` and the (A, P) mask of real entries."""
+    padded, lengths = _padded(paths)
+    return padded, lengths, np.arange(padded.shape[1])[None, :] < lengths[:, None]
 
 
 @dataclasses.dataclass(frozen=True)
