@@ -16,6 +16,7 @@ import numpy as np
 
 from taskalloc_env import Agent, Scenario, Task, TaskAllocEnv
 from taskalloc_env.cbba_table import NONE
+from taskalloc_env.groups import Equipment
 
 TOL = 1e-9
 
@@ -318,3 +319,40 @@ def draw_group_setup(draw: Callable) -> tuple[int, int, int, np.ndarray, np.ndar
             for _ in range(required[j]):
                 task_eq[j, draw(st.integers(0, n_types - 1))] += 1
     return n, m, r, required, agent_eq, task_eq
+
+
+def episode_digest(args: tuple[str, dict, int]) -> str:
+    """(policy name, env overrides, seed) → a hash of every action, reward, info and observation of a
+    ``train_small`` episode and its evaluation (module level, so a process pool can run it)."""
+    import hashlib
+    import json
+
+    from policies import make_policy
+
+    policy_name, overrides, seed = args
+    p = make_policy(policy_name)
+    env = TaskAllocEnv("train_small", **{**overrides, **p.env_overrides})
+    obs, infos = env.reset(seed=seed)
+    p.start(env, seed)
+    digest = hashlib.sha256()
+    while env.agents:
+        actions = p.act({a: obs[a] for a in env.agents}, infos)
+        obs, rewards, *_, infos = env.step(actions)
+        digest.update(json.dumps([actions, rewards, infos], sort_keys=True, default=str).encode())
+        for o in obs.values():
+            digest.update(o["observation"].tobytes())
+    digest.update(repr(env.evaluate()).encode())
+    return digest.hexdigest()
+
+
+def no_equipment(n: int) -> Equipment:
+    """N agents and one task, no equipment types."""
+    return Equipment(np.zeros((n, 0), dtype=bool), np.zeros((1, 0), dtype=np.int64))
+
+
+def typed(types: list[str], required: dict[str, int]) -> Equipment:
+    """Single-type agents (``types[i]``) and one task requiring the multiset ``required``."""
+    names = sorted(set(types) | set(required))
+    agent_eq = np.array([[t == name for name in names] for t in types], dtype=bool)
+    task_eq = np.array([[required.get(name, 0) for name in names]], dtype=np.int64)
+    return Equipment(agent_eq, task_eq)

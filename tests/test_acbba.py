@@ -4,15 +4,13 @@ asynchronously, faults, and determinism across processes."""
 
 from __future__ import annotations
 
-import hashlib
 import itertools
-import json
 import re
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
-from helpers import agent, build, task
+from helpers import agent, build, episode_digest, task
 
 from evaluation import acbba_check
 from policies import make_policy, rollout
@@ -361,28 +359,11 @@ ASYNC_CASES = [
 ]
 
 
-def async_digest(args: tuple[str, dict, int]) -> str:
-    policy_name, extra, seed = args
-    p = make_policy(policy_name)
-    env = TaskAllocEnv("train_small", **{"consensus": "acbba", **extra, **p.env_overrides})
-    obs, infos = env.reset(seed=seed)
-    p.start(env, seed)
-    digest = hashlib.sha256()
-    while env.agents:
-        actions = p.act({a: obs[a] for a in env.agents}, infos)
-        obs, rewards, *_, infos = env.step(actions)
-        digest.update(json.dumps([actions, rewards, infos], sort_keys=True, default=str).encode())
-        for o in obs.values():
-            digest.update(o["observation"].tobytes())
-    digest.update(repr(env.evaluate()).encode())
-    return digest.hexdigest()
-
-
 def test_asynchronous_episodes_replay_byte_identically_across_processes():
-    cases = [(name, extra, seed) for name, extra in ASYNC_CASES for seed in (3, 4)]
-    here = [async_digest(c) for c in cases]
+    cases = [(name, {"consensus": "acbba", **extra}, seed) for name, extra in ASYNC_CASES for seed in (3, 4)]
+    here = [episode_digest(c) for c in cases]
     with ProcessPoolExecutor(2) as pool:
-        there = list(pool.map(async_digest, cases))
+        there = list(pool.map(episode_digest, cases))
     assert here == there and len(set(here)) == len(here)
 
 

@@ -9,8 +9,9 @@ equipment is still needed, otherwise displacing the (bid, id)-minimum same-equip
 
 from __future__ import annotations
 
+import helpers
 import numpy as np
-from helpers import draw_group_setup
+from helpers import draw_group_setup, typed
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -33,15 +34,7 @@ def as_dict(col: np.ndarray) -> dict[int, float]:
 
 
 def no_equipment(n: int = N_AGENTS) -> Equipment:
-    return Equipment(np.zeros((n, 0), dtype=bool), np.zeros((1, 0), dtype=np.int64))
-
-
-def typed(types: list[str], required: dict[str, int]) -> Equipment:
-    """Single-type agents (``types[i]``) and one task requiring the multiset ``required``."""
-    names = sorted(set(types) | set(required))
-    agent_eq = np.array([[t == name for name in names] for t in types], dtype=bool)
-    task_eq = np.array([[required.get(name, 0) for name in names]], dtype=np.int64)
-    return Equipment(agent_eq, task_eq)
+    return helpers.no_equipment(n)
 
 
 def run(receiver: dict, sender: dict, required: int, *, fresher: tuple[int, ...] = (), staler: tuple[int, ...] = (),

@@ -20,8 +20,9 @@ with times in place of per-agent timestamps.
 
 from __future__ import annotations
 
+import helpers
 import numpy as np
-from helpers import draw_group_setup
+from helpers import draw_group_setup, typed
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -53,15 +54,7 @@ def ticks(times: np.ndarray) -> dict[int, int]:
 
 
 def no_equipment(n: int = N_AGENTS) -> Equipment:
-    return Equipment(np.zeros((n, 0), dtype=bool), np.zeros((1, 0), dtype=np.int64))
-
-
-def typed(types: list[str], required: dict[str, int]) -> Equipment:
-    """Single-type agents (``types[i]``) and one task requiring the multiset ``required``."""
-    names = sorted(set(types) | set(required))
-    agent_eq = np.array([[t == name for name in names] for t in types], dtype=bool)
-    task_eq = np.array([[required.get(name, 0) for name in names]], dtype=np.int64)
-    return Equipment(agent_eq, task_eq)
+    return helpers.no_equipment(n)
 
 
 def merged(receiver: Entries, sender: Entries, required: int, *, equipment: Equipment | None = None,

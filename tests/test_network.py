@@ -3,14 +3,12 @@ lost and delayed messages and failing agents."""
 
 from __future__ import annotations
 
-import hashlib
-import json
 import re
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
-from helpers import agent, build, task
+from helpers import agent, build, episode_digest, task
 
 from policies import make_policy, rollout
 from taskalloc_env import ConfigError, TaskAllocConfig, TaskAllocEnv
@@ -117,23 +115,6 @@ def test_a_failed_agent_leaves_and_its_tasks_are_reassigned():
     assert seen_exit and allocation.converged
     assert allocation.paths[1] == () and set(allocation.paths[0]) == {0, 1}
     assert allocation.counters.dropped_agents == 1 and allocation.counters.silent_releases >= 1
-
-
-def episode_digest(args: tuple[str, dict, int]) -> str:
-    policy_name, faults, seed = args
-    p = make_policy(policy_name)
-    env = TaskAllocEnv("train_small", **faults, **p.env_overrides)
-    obs, infos = env.reset(seed=seed)
-    p.start(env, seed)
-    digest = hashlib.sha256()
-    while env.agents:
-        actions = p.act({a: obs[a] for a in env.agents}, infos)
-        obs, rewards, *_, infos = env.step(actions)
-        digest.update(json.dumps([actions, rewards, infos], sort_keys=True, default=str).encode())
-        for o in obs.values():
-            digest.update(o["observation"].tobytes())
-    digest.update(repr(env.evaluate()).encode())
-    return digest.hexdigest()
 
 
 @pytest.mark.slow
