@@ -37,6 +37,7 @@ from policies import exact, make_policy, rollout, sgama
 from policies.base import Policy
 from policies.centralised import MAX_AGENTS, MAX_TASKS
 from policies.duo import preferred_duo_cbba
+from policies.fast import solvable as fast_solvable
 from policies.fast import solve as fast_solve
 from policies.scripted import CBGAPolicy
 from taskalloc_env import Scenario, TaskAllocConfig, TaskAllocEnv
@@ -141,7 +142,7 @@ def solve(solver: str | Policy, env: TaskAllocEnv, seed: int) -> Allocation:
         return table[solver.lower()][1](env.unwrapped.scenario, env.config)
     policy = policy_for(solver) if isinstance(solver, str) else solver
     unwrapped = env.unwrapped
-    if isinstance(policy, CBGAPolicy) and not (unwrapped.config.stochastic or unwrapped.config.asynchronous):
+    if isinstance(policy, CBGAPolicy) and fast_solvable(unwrapped.config):
         # the scripted consensus policies through the protocol directly: the same allocation and counters as the
         # rollout (tests/test_fast.py), without the env's observations, rewards and infos
         env.reset(seed=seed)

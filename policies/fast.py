@@ -24,6 +24,11 @@ from taskalloc_env.scenario import Scenario
 PASS = 0
 
 
+def solvable(config: TaskAllocConfig) -> bool:
+    """Whether ``solve`` reproduces an episode of ``config``: the synchronous protocol drawing no random numbers."""
+    return not (config.asynchronous or config.stochastic)
+
+
 def solve(scenario: Scenario, config: TaskAllocConfig, policy: str | CBGAPolicy, *, dtype: str = "float32",
           max_cycles: int | None = None) -> Allocation:
     """The allocation ``rollout`` reaches with ``policy`` on ``scenario`` in an env of ``config`` (and ``dtype``,

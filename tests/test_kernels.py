@@ -201,14 +201,14 @@ def test_the_references_can_be_chosen_and_a_typo_is_refused():
 def test_allocations_with_the_kernels_equal_those_with_the_references(sample, monkeypatch):
     """End to end on fuzzed configs: the same paths, groups and counters; scores to the last bit of exp."""
     from evaluation.fuzz import draw_config
-    from policies.fast import solve
+    from policies.fast import solvable, solve
     from taskalloc_env import TaskAllocEnv, resolve_config
 
     rng, extra, checked = np.random.default_rng(100 + sample), np.random.default_rng([100 + sample, 2]), 0
     while checked < 30:
         kw = draw_config(rng, extra)
         cfg = resolve_config("default", **kw)
-        if cfg.stochastic or cfg.asynchronous:      # the direct solver's domain (tests/test_fast.py)
+        if not solvable(cfg):                       # the direct solver's domain (tests/test_fast.py)
             continue
         name = ("cbga", "cbga+tb", "cbga+tq", "cbgabi", "cbba")[checked % 5]
         env = TaskAllocEnv(**kw | ({"agents_per_task": 1} if name == "cbba" else {}), max_cycles=300)
