@@ -48,23 +48,25 @@ def solve(scenario: Scenario, config: TaskAllocConfig, policy: str | CBGAPolicy,
     unit, float_type = Scales.of(scenario).reward_unit, np.dtype(dtype)
     m = scenario.n_tasks
     passed = np.zeros(scenario.n_agents, dtype=bool)
+    masks = np.zeros((scenario.n_agents, 1 + 2 * m), dtype=bool)     # row i: agent i's action mask
+    masks[:, 0] = True
     steps = 0
     while True:
-        view, quits = protocol.view(), protocol.quit_options()
+        view = protocol.view()
+        masks[:, 1: m + 1] = view.can_bid
+        if config.task_quitting:            # otherwise no quit is ever allowed and those columns stay False
+            masks[:, m + 1:] = protocol.quit_options()
         acting = np.flatnonzero(~passed)
-        mask = np.zeros((len(acting), 1 + 2 * m), dtype=bool)
-        mask[:, 0] = True
-        mask[:, 1: m + 1] = view.can_bid[acting]
-        mask[:, m + 1:] = quits[acting]
-        columns = [(getattr(view, name)[acting] / unit).astype(float_type)
-                   for name in ("gain", "group_total", "displaced_bid")]
-        for i, action in zip(acting, policy.choose(mask, *columns).tolist()):
+        mask = masks[acting]
+        # the rule reads only its own columns, as the observation gives them: divided by the unit, in ``dtype``
+        columns = [(getattr(view, name)[acting] / unit).astype(float_type) for name in policy.columns]
+        for i, action in zip(acting.tolist(), policy.choose(mask, *columns).tolist()):
             if action == PASS:
                 passed[i] = True
             elif action <= m:
-                protocol.bid(int(i), action - 1, view=view)
+                protocol.bid(i, action - 1, view=view)
             else:
-                protocol.quit(int(i), action - m - 1)
+                protocol.quit(i, action - m - 1)
         steps += 1
         if config.consensus == "every_step" or passed.all():
             protocol.end_round()

@@ -74,15 +74,22 @@ class CBGAPolicy(Policy):
         agents = list(observations)
         masks = np.stack([observations[a]["action_mask"] for a in agents]).astype(bool)
         _, tasks = self.layout.split(np.stack([observations[a]["observation"] for a in agents]))
-        gain, total, displaced = (tasks[..., self.layout.task_column(name)]
-                                  for name in ("gain", "group_total", "displaced_bid"))
-        return dict(zip(agents, self.choose(masks, gain, total, displaced).tolist()))
+        columns = (tasks[..., self.layout.task_column(name)] for name in self.columns)
+        return dict(zip(agents, self.choose(masks, *columns).tolist()))
 
-    def choose(self, mask: np.ndarray, gain: np.ndarray, group_total: np.ndarray,
-               displaced_bid: np.ndarray) -> np.ndarray:
-        """Actions (A,) from action masks (A, 1 + 2M) and the observation's gain, group total and displaced bid
-        columns (A, M): the first allowed quit (task order), else the best allowed bid (lowest task id on ties),
-        else pass. The one home of the rule, for ``act`` and for the direct solver (``policies.fast``)."""
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """The observation's task columns the rule reads, in ``choose``'s argument order."""
+        if not self.team_bidding:
+            return ("gain",)
+        return ("gain", "group_total", "displaced_bid") if self.team_value == "net" else ("gain", "group_total")
+
+    def choose(self, mask: np.ndarray, gain: np.ndarray, group_total: np.ndarray | None = None,
+               displaced_bid: np.ndarray | None = None) -> np.ndarray:
+        """Actions (A,) from action masks (A, 1 + 2M) and the observation's task ``columns`` (A, M) — gain, and with
+        team bidding the group total (and the displaced bid for ``net``): the first allowed quit (task order), else
+        the best allowed bid (lowest task id on ties), else pass. The one home of the rule, for ``act`` and for the
+        direct solver (``policies.fast``)."""
         m = gain.shape[1]
         valid = mask[:, 1: m + 1]
         value = gain

@@ -10,7 +10,9 @@ import dataclasses
 from collections.abc import Sequence
 from typing import Any
 
-from taskalloc_env.scoring import Schedule, ScoringModel, team_score
+import numpy as np
+
+from taskalloc_env.scoring import Schedule, ScoringModel, TeamScore, team_score
 
 
 @dataclasses.dataclass
@@ -77,17 +79,24 @@ class Allocation:
         infeasible = [i for i, s in enumerate(schedules) if not s.feasible]
         if infeasible:
             raise ValueError(f"the paths of agents {infeasible} miss a time window; an allocation must be feasible")
-        ts = team_score(model, schedules, conflict_policy)
-        n_tasks = model.scenario.n_tasks
-        members = tuple(tuple(int(i) for i in ts.members[:, j].nonzero()[0]) for j in range(n_tasks))
+        return cls.scored([s.path for s in schedules], [s.start for s in schedules],
+                          team_score(model, schedules, conflict_policy), **figures)
+
+    @classmethod
+    def scored(cls, paths: Sequence[Sequence[int]], start_times: Sequence[np.ndarray], team: TeamScore,
+               **figures: Any) -> Allocation:
+        """Wrap paths, their start times and their ``team_score`` (computed by the caller) with the run's figures."""
+        members: list[list[int]] = [[] for _ in range(team.members.shape[1])]
+        for j, i in zip(*(a.tolist() for a in np.nonzero(team.members.T))):       # task-major, agents ascending
+            members[j].append(i)
         return cls(
-            paths=tuple(tuple(s.path) for s in schedules),
-            start_times=tuple(tuple(float(t) for t in s.start) for s in schedules),
-            members=members,
-            valid_tasks=tuple(int(j) for j in ts.valid.nonzero()[0]),
-            conflicts=tuple(int(j) for j in ts.conflicts.nonzero()[0]),
-            score=ts.score,
-            agent_scores=tuple(float(v) for v in ts.agent_scores),
+            paths=tuple(tuple(int(j) for j in path) for path in paths),
+            start_times=tuple(tuple(np.asarray(start, dtype=float).tolist()) for start in start_times),
+            members=tuple(map(tuple, members)),
+            valid_tasks=tuple(np.flatnonzero(team.valid).tolist()),
+            conflicts=tuple(np.flatnonzero(team.conflicts).tolist()),
+            score=team.score,
+            agent_scores=tuple(team.agent_scores.tolist()),
             **figures,
         )
 

@@ -422,10 +422,12 @@ class Protocol:
 
     def allocation(self) -> Allocation:
         """The allocation as it stands: flown paths with start times, groups, validity, score, the run's figures."""
-        return Allocation.from_paths(self.model, self.flown_paths, self.cfg.conflict_policy, schedules=self.schedules,
-                                     counters=dataclasses.replace(self.counters), converged=self.converged,
-                                     agreement=self.agreement(), globally_converged=self.globally_converged,
-                                     locally_converged=self.locally_converged)
+        paths = self.flown_paths
+        team = self.score()             # the cached team score over the path table the bids keep timed
+        return Allocation.scored(paths, [self._paths.start[i, path] for i, path in enumerate(paths)], team,
+                                 counters=dataclasses.replace(self.counters), converged=self.converged,
+                                 agreement=self.agreement(), globally_converged=self.globally_converged,
+                                 locally_converged=self.locally_converged)
 
     # -- agreement -------------------------------------------------------------------------------------------------
     def agreement(self) -> bool:

@@ -165,7 +165,7 @@ class Scenario:
         capable = self.eligible().sum(axis=0)
         everyone = np.ones((self.n_agents, self.n_tasks), dtype=bool)
         short = Equipment(self.agent_equipment, self.task_equipment).items(everyone) < self.task_equipment
-        for j in range(self.n_tasks):
+        for j in np.flatnonzero((capable < self.task_agents) | short.any(axis=1)).tolist():
             if capable[j] < self.task_agents[j]:
                 reasons[j] = (f"needs L_j = {self.task_agents[j]} agents but only {capable[j]} carry "
                               "equipment it accepts")
