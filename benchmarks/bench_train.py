@@ -3,9 +3,10 @@
     python -m benchmarks.bench_train                              # SB3 MaskablePPO and our MAPPO loop
     python -m benchmarks.bench_train --algos sb3 mappo rllib      # RLlib too (pip install taskalloc[ray])
     python -m benchmarks.bench_train --algos sb3 --n-procs 0 2    # SB3 with its copies in 0 and 2 subprocesses
+    python -m benchmarks.bench_train --algos sb3 --torch-threads 1 2   # SB3 updates on one core and on two
 
 Every algorithm trains on ``train_small`` (4 agents) for about ``--steps`` agent steps from a fresh network, one
-torch thread:
+torch thread unless ``--torch-threads`` says otherwise (SB3):
 
 * ``sb3``: ``training.train`` with ``configs/training/train_small.yaml`` (MaskablePPO, pooling actor and a critic
   on the local observation, 8 copies = 32 slots, 10 epochs);
@@ -35,12 +36,12 @@ ALGOS = ("sb3", "mappo", "rllib")
 AGENTS = 4      # train_small
 
 
-def bench_sb3(steps: int, n_procs: int, out_dir: str) -> dict[str, float]:
+def bench_sb3(steps: int, n_procs: int, out_dir: str, torch_threads: int = 1) -> dict[str, float]:
     from training.train import build_model, load_config
     from training.vec_env import TaskAllocVecEnv, make_env_fns
 
     cfg = load_config(["--config", "train_small", "--n-procs", str(n_procs), "--tensorboard", "false",
-                       "--progress-bar", "false", "--out-dir", out_dir])
+                       "--progress-bar", "false", "--out-dir", out_dir, "--torch-threads", str(torch_threads)])
     th.set_num_threads(cfg.torch_threads)
     venv = TaskAllocVecEnv(make_env_fns(cfg.n_envs, **cfg.env_kwargs()), n_procs=n_procs)
     model = build_model(cfg, venv)
@@ -77,14 +78,18 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, float | str]]:
     parser.add_argument("--steps", type=int, default=40_960, help="agent steps per measurement (default 40 960)")
     parser.add_argument("--n-procs", type=int, nargs="+", default=[0],
                         help="sb3 only: subprocesses for the env copies, one measurement each (default 0)")
+    parser.add_argument("--torch-threads", type=int, nargs="+", default=[1],
+                        help="sb3 only: torch threads, one measurement each (default 1; 2 uses both cores in the "
+                             "updates)")
     args = parser.parse_args(argv)
     if args.steps < 4096:
         raise ConfigError(f"--steps: got {args.steps}; allowed: an integer >= 4096 (one rollout of every algorithm)")
     cases: list[tuple[str, Callable[[str], dict[str, float]]]] = []
     for algo in args.algos:
         if algo == "sb3":
-            cases += [(f"SB3 MaskablePPO, pooling, n_procs {k}", lambda out, k=k: bench_sb3(args.steps, k, out))
-                      for k in args.n_procs]
+            cases += [(f"SB3 MaskablePPO, pooling, n_procs {k}, torch threads {t}",
+                       lambda out, k=k, t=t: bench_sb3(args.steps, k, out, t))
+                      for k in args.n_procs for t in args.torch_threads]
         elif algo == "mappo":
             cases += [("MAPPO (training.mappo), attention", lambda out: bench_mappo(args.steps, "mappo_small", out)),
                       ("MAPPO (training.mappo), pooling",

@@ -35,6 +35,7 @@ from taskalloc_env import kernels
 from taskalloc_env.config import TaskAllocConfig
 from taskalloc_env.groups import Equipment
 from taskalloc_env.kernels.plan import plan_paths, set_table_rows
+from taskalloc_env.kernels.score import paid_groups
 from taskalloc_env.scenario import Scenario
 
 
@@ -412,6 +413,24 @@ def team_score(model: ScoringModel, paths: Sequence[Schedule] | PathTable,
     s = model.scenario
     table = paths if isinstance(paths, PathTable) else PathTable.of(paths, s.n_tasks)
     members = table.members
+    if kernels.COMPILED:
+        n, m = members.shape
+        paid, valid, conflicts = np.empty((n, m), dtype=bool), np.empty(m, dtype=bool), np.empty(m, dtype=bool)
+        paid_groups(members, table.start, s.task_agents, model.equipment.required, model.equipment.agent,
+                    model.equipment.any, s.task_prereqs, s.has_prerequisites, conflict_policy == "first_L_paid",
+                    paid, valid, conflicts)
+    else:
+        paid, valid, conflicts = paid_groups_reference(model, table, conflict_policy)
+    agent_scores = np.where(paid, table.reward, 0.0).sum(axis=1) - table.cost
+    return TeamScore(float(agent_scores.sum()), agent_scores, members.copy(), paid, valid, conflicts)
+
+
+def paid_groups_reference(model: ScoringModel, table: PathTable,
+                          conflict_policy: str = "first_L_paid") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``team_score``'s (N, M) paid members, (M,) valid tasks and conflicts in numpy (the reference of
+    ``kernels.score.paid_groups``)."""
+    s = model.scenario
+    members = table.members
     count = members.sum(axis=0)
     conflicts = count > s.task_agents
     paid = members & (count == s.task_agents)[None, :]
@@ -422,5 +441,4 @@ def team_score(model: ScoringModel, paths: Sequence[Schedule] | PathTable,
     valid = paid.any(axis=0) & model.equipment.covers(paid)
     valid = prerequisites_valid(s, valid)
     paid &= valid[None, :]
-    agent_scores = np.where(paid, table.reward, 0.0).sum(axis=1) - table.cost
-    return TeamScore(float(agent_scores.sum()), agent_scores, members.copy(), paid, valid, conflicts)
+    return paid, valid, conflicts

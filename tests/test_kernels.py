@@ -17,7 +17,7 @@ from taskalloc_env.groups import Equipment
 from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.network import Deliveries
 from taskalloc_env.scenario import Agent, Scenario, Task, generate
-from taskalloc_env.scoring import ScoringModel
+from taskalloc_env.scoring import PathTable, ScoringModel, paid_groups_reference, team_score
 
 pytestmark = pytest.mark.skipif(not kernels.COMPILED, reason="numba is not installed")
 
@@ -118,6 +118,41 @@ def test_compiled_plan_equals_the_reference(case):
     np.testing.assert_allclose(got.gain, want.gain, rtol=1e-12, atol=1e-12)
     ties = np.isclose(got.gain, want.gain, rtol=1e-12) & (got.slot != want.slot)
     np.testing.assert_array_equal(got.slot[~ties], want.slot[~ties])
+
+
+@st.composite
+def score_tables(draw):
+    """Path tables with conflicts (more than L_j members), equal start times, equipment and prerequisites."""
+    n, m = draw(st.integers(1, 6)), draw(st.integers(1, 7))
+    typed = draw(st.booleans())
+    agents = [Agent((float(k), 0.0, 0.0), 1.0, (draw(st.sampled_from("AB")),) if typed else ()) for k in range(n)]
+    tasks = []
+    for j in range(m):
+        need = draw(st.integers(1, 3))
+        equipment = tuple(draw(st.sampled_from("AB")) for _ in range(need)) if typed and draw(st.booleans()) else ()
+        prereqs = tuple(p for p in range(j) if draw(st.integers(0, 3)) == 0)
+        tasks.append(Task((1.0, 1.0, 0.0), 100.0, 0.0, 50.0, 1.0, agents=need, equipment=equipment,
+                          prerequisites=prereqs))
+    scenario = Scenario.from_entities(agents, tasks, equipment_names=("A", "B") if typed else ())
+    table = PathTable.empty(n, m)
+    table.members[:] = np.array([[draw(st.integers(0, 2)) > 0 for _ in range(m)] for _ in range(n)])
+    table.start[table.members] = [draw(st.sampled_from([1.0, 2.0, 2.0, 3.5])) for _ in range(table.members.sum())]
+    table.reward[table.members] = [draw(st.sampled_from([10.0, 20.5, 0.1])) for _ in range(table.members.sum())]
+    table.cost[:] = [draw(st.sampled_from([0.0, 1.5])) for _ in range(n)]
+    return ScoringModel(scenario), table, draw(st.sampled_from(["first_L_paid", "none_paid"]))
+
+
+@pytest.mark.filterwarnings("ignore:tasks .* are identical")
+@settings(max_examples=400, deadline=None)
+@given(score_tables())
+def test_compiled_team_score_equals_the_reference(case):
+    """Paid members, valid tasks, conflicts and the score agree exactly with the numpy lines (``kernels/score.py``)."""
+    model, table, conflict_policy = case
+    got = team_score(model, table, conflict_policy)
+    paid, valid, conflicts = paid_groups_reference(model, table, conflict_policy)
+    for name, want in (("paid", paid), ("valid", valid), ("conflicts", conflicts)):
+        np.testing.assert_array_equal(getattr(got, name), want, err_msg=name)
+    assert got.score == float((np.where(paid, table.reward, 0.0).sum(axis=1) - table.cost).sum())
 
 
 @st.composite
