@@ -18,6 +18,9 @@ import dataclasses
 import numpy as np
 from gymnasium import spaces
 
+from taskalloc_env import kernels
+from taskalloc_env.kernels.observe import COLUMNS as KERNEL_COLUMNS
+from taskalloc_env.kernels.observe import task_features
 from taskalloc_env.protocol import Protocol
 from taskalloc_env.scenario import Scenario
 
@@ -154,6 +157,7 @@ class ObservationBuilder:
         self.scales = Scales.of(s)
         self._buffer = self._static_features(protocol)
         self._columns = {name: c for c, name in enumerate(self.layout.task_names)}
+        self._kernel_columns = np.array([self._columns[name] for name in KERNEL_COLUMNS], dtype=np.int64)
         self._tasks = self._buffer[:, self.layout.own_size:].reshape(s.n_agents, s.n_tasks, self.layout.task_size)
         # with pop-up tasks a hidden task's block is zeroed, its fixed columns too: kept to restore on release
         self._static_tasks = self._tasks.copy() if protocol.cfg.popup_tasks else None
@@ -179,7 +183,25 @@ class ObservationBuilder:
         return obs
 
     def build(self, protocol: Protocol, passed: np.ndarray, dtype: np.dtype | type = np.float64) -> np.ndarray:
-        """(N, D) observations in ``dtype`` (a new array); row i uses only agent i's table, path and flags."""
+        """(N, D) observations in ``dtype`` (a new array); row i uses only agent i's table, path and flags. The
+        per-step task columns are written by the compiled ``kernels.observe.task_features`` when numba is there,
+        else by ``build_reference``'s numpy lines (the same values, bit for bit)."""
+        if not kernels.COMPILED:
+            return self.build_reference(protocol, passed, dtype)
+        s = protocol.scenario
+        kn = protocol.knowledge
+        view = protocol.view()
+        if self._static_tasks is not None:
+            np.copyto(self._tasks, self._static_tasks)
+        task_features(self._tasks, self._kernel_columns, self.scales.reward_unit, view.gain, view.can_bid,
+                      view.outbid, view.members, s.task_agents, view.lowest_bid, view.group_total, view.displaced_bid,
+                      view.in_bundle, kn.own_bids(), kn.quit, protocol.quit_options(), protocol.round,
+                      kn.assigned_at, view.prereqs_met)
+        return self._finish(protocol, passed, dtype)
+
+    def build_reference(self, protocol: Protocol, passed: np.ndarray, dtype: np.dtype | type = np.float64
+                        ) -> np.ndarray:
+        """``build`` in numpy (the reference of ``kernels.observe.task_features``)."""
         s = protocol.scenario
         kn = protocol.knowledge
         view = protocol.view()
@@ -202,6 +224,14 @@ class ObservationBuilder:
         f[:, :, col("rounds_since_change")] = np.where(view.in_bundle, protocol.round - kn.assigned_at, 0)
         f[:, :, col("prereqs_met")] = view.prereqs_met
         f[:, :, col("group_complete")] = view.members == s.task_agents[None, :]
+        return self._finish(protocol, passed, dtype)
+
+    def _finish(self, protocol: Protocol, passed: np.ndarray, dtype: np.dtype | type) -> np.ndarray:
+        """The mode-dependent task columns and the agent's own per-step features; the observations in ``dtype``."""
+        s = protocol.scenario
+        kn = protocol.knowledge
+        col = self._columns.__getitem__
+        f = self._tasks
         if "member_silence" in self.layout.task_names:
             silence = (protocol.round - kn.timestamps) / protocol.silence_timeout               # (N, N)
             np.fill_diagonal(silence, 0.0)

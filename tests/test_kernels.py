@@ -233,6 +233,31 @@ def test_the_references_can_be_chosen_and_a_typo_is_refused():
 
 
 @pytest.mark.parametrize("sample", range(2))
+def test_compiled_observations_equal_the_reference(sample):
+    """Every step of random-policy episodes on fuzzed configs (faults, pop-ups, ACBBA, task quitting included):
+    ``build`` with the compiled task features gives the same bytes as ``build_reference``."""
+    from evaluation.fuzz import draw_config
+    from policies import make_policy
+    from taskalloc_env import TaskAllocEnv
+
+    rng, extra = np.random.default_rng(300 + sample), np.random.default_rng([300 + sample, 2])
+    steps = 0
+    for episode in range(12):
+        env = TaskAllocEnv(**draw_config(rng, extra), max_cycles=60)
+        policy = make_policy("random")
+        obs, _ = env.reset(seed=episode)
+        policy.start(env, episode)
+        while env.agents:
+            protocol, builder, passed = env.protocol, env._builder, env._passed
+            for dtype in (np.float32, np.float64):
+                compiled = builder.build(protocol, passed, dtype)
+                assert compiled.tobytes() == builder.build_reference(protocol, passed, dtype).tobytes()
+            steps += 1
+            obs, *_ = env.step(policy.act(obs))
+    assert steps > 100
+
+
+@pytest.mark.parametrize("sample", range(2))
 def test_allocations_with_the_kernels_equal_those_with_the_references(sample, monkeypatch):
     """End to end on fuzzed configs: the same paths, groups and counters; scores to the last bit of exp."""
     from evaluation.fuzz import draw_config
