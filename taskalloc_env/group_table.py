@@ -29,7 +29,7 @@ class GroupOverflow(ValueError):
 
 @dataclasses.dataclass(eq=False)
 class GroupTable:
-    """The groups of every holder's table: (holder, task, slot) arrays of at most W = max_j L_j members each."""
+    """The groups of every holder's table: (holder, task, slot) arrays of W = min(max_j L_j, N) member slots."""
 
     members: np.ndarray         # (N, M, W) member ids k, increasing; EMPTY after the last
     bids: np.ndarray            # (N, M, W) X_i[k][j] of each member; 0 in empty slots
@@ -41,7 +41,7 @@ class GroupTable:
     def empty(cls, n_holders: int, n_agents: int, capacity: np.ndarray) -> GroupTable:
         capacity = np.asarray(capacity, dtype=np.int64)
         m = len(capacity)
-        width = max(int(capacity.max(initial=1)), 1)
+        width = max(min(int(capacity.max(initial=1)), n_agents), 1)        # a group has at most N members
         return cls(np.full((n_holders, m, width), EMPTY, dtype=np.int64), np.zeros((n_holders, m, width)),
                    np.zeros((n_holders, m), dtype=np.int64), capacity.copy(), n_agents)
 
