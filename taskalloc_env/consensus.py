@@ -83,7 +83,7 @@ def exchange(knowledge: LocalKnowledge, deliveries: Deliveries, snapshots: dict[
 
     g = kn.groups
     informative = exchange_all(
-        g.count, g.members, g.bids, kn.timestamps, kn.known, stacked([snap.groups.count for snap in stack]),
+        g.count, g.members, g.bids, g.own, kn.timestamps, kn.known, stacked([snap.groups.count for snap in stack]),
         stacked([snap.groups.members for snap in stack]), stacked([snap.groups.bids for snap in stack]),
         stacked([snap.stamps for snap in stack]), stacked([snap.known for snap in stack]), deliveries.receiver,
         deliveries.sender, slot, float(now), kn.single, required_agents, equipment.restricted, equipment.required,

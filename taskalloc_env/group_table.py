@@ -16,6 +16,7 @@ matrices they stand for are; the compiled merge (``kernels.merge.exchange_all``)
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 
 import numpy as np
@@ -34,6 +35,7 @@ class GroupTable:
     members: np.ndarray         # (N, M, W) member ids k, increasing; EMPTY after the last
     bids: np.ndarray            # (N, M, W) X_i[k][j] of each member; 0 in empty slots
     count: np.ndarray           # (N, M) n_j = #{k : X_i[k][j] > 0} (4.3)
+    own: np.ndarray             # (N, M) X_i[i][j], the holder's own bids, kept with every write (read at every step)
     capacity: np.ndarray        # (M,) L_j
     n_agents: int
 
@@ -43,11 +45,12 @@ class GroupTable:
         m = len(capacity)
         width = max(min(int(capacity.max(initial=1)), n_agents), 1)        # a group has at most N members
         return cls(np.full((n_holders, m, width), EMPTY, dtype=np.int64), np.zeros((n_holders, m, width)),
-                   np.zeros((n_holders, m), dtype=np.int64), capacity.copy(), n_agents)
+                   np.zeros((n_holders, m), dtype=np.int64), np.zeros((n_holders, m)), capacity.copy(), n_agents)
 
     def copy(self) -> GroupTable:
-        """A snapshot: the three arrays copied (N·M·W each), the capacities shared."""
-        return GroupTable(self.members.copy(), self.bids.copy(), self.count.copy(), self.capacity, self.n_agents)
+        """A snapshot: the arrays copied (N·M·W members and bids, N·M counts and own bids), the capacities shared."""
+        return GroupTable(self.members.copy(), self.bids.copy(), self.count.copy(), self.own.copy(), self.capacity,
+                          self.n_agents)
 
     def __eq__(self, other: object) -> bool:
         """The same groups with the same bids in every table (the dense matrices are equal)."""
@@ -75,8 +78,7 @@ class GroupTable:
 
     def own_bids(self) -> np.ndarray:
         """(N, M) X_i[i][j]: each holder's own bids."""
-        own = self.members == np.arange(len(self.members))[:, None, None]
-        return np.where(own, self.bids, 0.0).max(axis=2)
+        return self.own.copy()
 
     def lists(self, agent: int) -> np.ndarray:
         """(N, M) the holders that list ``agent`` in task j's group."""
@@ -95,12 +97,21 @@ class GroupTable:
 
     def joined(self, before: GroupTable) -> np.ndarray:
         """(N, M) a member of j's group in i's table that ``before`` did not list."""
-        was = (self.members[:, :, :, None] == before.members[:, :, None, :]).any(axis=3)
-        return ((self.members >= 0) & ~was).any(axis=2)
+        out = np.zeros(self.count.shape, dtype=bool)
+        for s in range(self.members.shape[2]):
+            member = self.members[:, :, s]
+            was = np.zeros(out.shape, dtype=bool)
+            for b in range(before.members.shape[2]):
+                was |= before.members[:, :, b] == member
+            out |= (member >= 0) & ~was
+        return out
 
     def changed(self, before: GroupTable) -> np.ndarray:
         """(N, M) column j of i's table differs from ``before``'s (a member or a bid)."""
-        return (self.members != before.members).any(axis=2) | (self.bids != before.bids).any(axis=2)
+        out = np.zeros(self.count.shape, dtype=bool)
+        for s in range(self.members.shape[2]):
+            out |= (self.members[:, :, s] != before.members[:, :, s]) | (self.bids[:, :, s] != before.bids[:, :, s])
+        return out
 
     def dense(self, i: int) -> np.ndarray:
         """(N, M) holder i's matrix X_i[k][j] (tests and debugging)."""
@@ -118,12 +129,13 @@ class GroupTable:
     def set(self, i: int, k: int, j: int, value: float) -> None:
         """X_i[k][j] = value: k joins (or re-bids in) j's group if value > 0, leaves it otherwise."""
         n = int(self.count[i, j])
-        row = self.members[i, j]
-        at = int(np.searchsorted(row[:n], k))
-        present = at < n and row[at] == k
+        at = bisect.bisect_left(self.members[i, j, :n].tolist(), k)
+        present = at < n and self.members[i, j, at] == k
         if value > 0:
             if present:
                 self.bids[i, j, at] = value
+                if k == i:
+                    self.own[i, j] = value
                 return
             if n >= self.capacity[j]:
                 raise GroupOverflow(f"agent {k} would be member {n + 1} of task {j}'s group in agent {i}'s table "
@@ -132,11 +144,15 @@ class GroupTable:
             self.bids[i, j, at + 1: n + 1] = self.bids[i, j, at: n]
             self.members[i, j, at], self.bids[i, j, at] = k, value
             self.count[i, j] = n + 1
+            if k == i:
+                self.own[i, j] = value
         elif present:
             self.members[i, j, at: n - 1] = self.members[i, j, at + 1: n]
             self.bids[i, j, at: n - 1] = self.bids[i, j, at + 1: n]
             self.members[i, j, n - 1], self.bids[i, j, n - 1] = EMPTY, 0.0
             self.count[i, j] = n - 1
+            if k == i:
+                self.own[i, j] = 0.0
 
     def set_winners(self, holders: np.ndarray, tasks: np.ndarray, winner: np.ndarray, bid: np.ndarray) -> None:
         """Overwrite single-agent columns (holder, task) with (winner, bid) pairs in slot 0 (EMPTY clears)."""
@@ -144,6 +160,7 @@ class GroupTable:
         self.members[holders, tasks, 0] = winner
         self.bids[holders, tasks, 0] = np.where(has, bid, 0.0)
         self.count[holders, tasks] = has
+        self.own[holders, tasks] = np.where(winner == holders, self.bids[holders, tasks, 0], 0.0)
 
     def set_columns(self, holders: np.ndarray, tasks: np.ndarray, block: np.ndarray) -> None:
         """Overwrite the columns ``holders`` × ``tasks`` with the dense (R, N, T) ``block`` (its positive entries)."""
@@ -165,9 +182,11 @@ class GroupTable:
         self.members[where] = members
         self.bids[where] = bids
         self.count[where] = count
+        own = block[np.arange(len(holders))[:, None], holders[:, None], np.arange(len(tasks))[None, :]]
+        self.own[where] = np.where(own > 0, own, 0.0)
 
     def _slot(self, i: int, k: int, j: int) -> int:
         """The slot of member k in (i, j), or −1."""
         n = int(self.count[i, j])
-        at = int(np.searchsorted(self.members[i, j, :n], k))
+        at = bisect.bisect_left(self.members[i, j, :n].tolist(), k)
         return at if at < n and self.members[i, j, at] == k else -1

@@ -225,6 +225,8 @@ def check_tables(env: TaskAllocEnv) -> None:
     slots = np.arange(g.members.shape[2])[None, None, :] < g.count[:, :, None]
     assert np.all((g.members >= 0) == slots) and np.all(g.bids[~slots] == 0) and np.all(g.bids[slots] > 0)
     assert np.all((np.diff(g.members, axis=2) > 0) | ~slots[:, :, 1:]), "members out of increasing id order"
+    holder = np.arange(n)[:, None, None]
+    np.testing.assert_array_equal(g.own, np.where(g.members == holder, g.bids, 0.0).max(axis=2), err_msg="own bids")
     # the single-agent winner (slot 0) agrees with the matrix (one winner per single-agent task)
     for i in range(n):
         for j in np.flatnonzero(s.task_agents == 1):

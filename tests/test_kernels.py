@@ -79,7 +79,7 @@ def test_compiled_exchange_equals_the_reference(case):
     got = exchange(compiled, deliveries, snaps, 9, need, equipment, table)
     want = exchange_reference(reference, deliveries, snaps, 9, need, equipment, table)
     assert got == want
-    for name in ("count", "members", "bids"):
+    for name in ("count", "members", "bids", "own"):
         np.testing.assert_array_equal(getattr(compiled.groups, name), getattr(reference.groups, name), err_msg=name)
     for name in ("winner", "timestamps", "known"):
         np.testing.assert_array_equal(getattr(compiled, name), getattr(reference, name), err_msg=name)

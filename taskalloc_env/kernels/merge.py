@@ -273,7 +273,8 @@ def _columns_to_visit(count_i: np.ndarray, ids_i: np.ndarray, single: np.ndarray
 
 
 @jit
-def exchange_all(count: np.ndarray, ids: np.ndarray, values: np.ndarray, stamps: np.ndarray, known: np.ndarray,
+def exchange_all(count: np.ndarray, ids: np.ndarray, values: np.ndarray, own: np.ndarray, stamps: np.ndarray,
+                 known: np.ndarray,
                  snap_count: np.ndarray, snap_ids: np.ndarray, snap_values: np.ndarray, snap_stamps: np.ndarray,
                  snap_known: np.ndarray, receiver: np.ndarray, sender: np.ndarray, slot: np.ndarray, now: float,
                  single: np.ndarray, need: np.ndarray, restricted: np.ndarray, required: np.ndarray,
@@ -281,7 +282,8 @@ def exchange_all(count: np.ndarray, ids: np.ndarray, values: np.ndarray, stamps:
     """Process deliveries (sorted by receiver, send round, sender) in place; returns the informative messages.
 
     The receivers' groups are the ``GroupTable`` arrays (``count`` (N, M), member ``ids`` and their bid ``values``
-    (N, M, W), ids increasing, empty slots EMPTY/0), written in place in the same layout. ``snap_*`` stack the
+    (N, M, W), ids increasing, empty slots EMPTY/0, and each holder's ``own`` bids (N, M)), written in place in the
+    same layout. ``snap_*`` stack the
     snapshots the messages come from ((Q, N, …)); ``slot[d]`` is delivery d's index into them. A single-agent
     task's winner and bid are slot 0; a multi-agent column is a member list of at most L_j, so a message costs
     O(M · L), not O(M · N).
@@ -330,6 +332,7 @@ def exchange_all(count: np.ndarray, ids: np.ndarray, values: np.ndarray, stamps:
                 ids[i, j, 0] = new_z
                 values[i, j, 0] = 0.0 if new_z == NONE else new_y
                 count[i, j] = 0 if new_z == NONE else 1
+                own[i, j] = new_y if new_z == i else 0.0
                 changed = True
                 continue
             if content[i, j] >= 0 and content[i, j] == sent_content[t, j]:
@@ -348,6 +351,7 @@ def exchange_all(count: np.ndarray, ids: np.ndarray, values: np.ndarray, stamps:
             for c in range(c_i if same else 0):
                 same = same and ids[i, j, c] == before_ids[c] and values[i, j, c] == before_values[c]
             if not same:
+                own[i, j] = _value_of(i, c_new, ids[i, j], values[i, j])
                 content[i, j] = _lookup(c_new, ids[i, j], values[i, j], keys, owner, m, sent_count, sent_ids,
                                         sent_values)
                 changed = True
