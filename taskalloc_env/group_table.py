@@ -128,31 +128,31 @@ class GroupTable:
     # -- writes ------------------------------------------------------------------------------------------------
     def set(self, i: int, k: int, j: int, value: float) -> None:
         """X_i[k][j] = value: k joins (or re-bids in) j's group if value > 0, leaves it otherwise."""
+        members, bids = self.members[i, j], self.bids[i, j]
         n = int(self.count[i, j])
-        at = bisect.bisect_left(self.members[i, j, :n].tolist(), k)
-        present = at < n and self.members[i, j, at] == k
+        at = bisect.bisect_left(members.tolist(), k, 0, n)
+        present = at < n and members[at] == k
         if value > 0:
-            if present:
-                self.bids[i, j, at] = value
-                if k == i:
-                    self.own[i, j] = value
-                return
-            if n >= self.capacity[j]:
-                raise GroupOverflow(f"agent {k} would be member {n + 1} of task {j}'s group in agent {i}'s table "
-                                    f"(L_j = {self.capacity[j]})")
-            self.members[i, j, at + 1: n + 1] = self.members[i, j, at: n]
-            self.bids[i, j, at + 1: n + 1] = self.bids[i, j, at: n]
-            self.members[i, j, at], self.bids[i, j, at] = k, value
-            self.count[i, j] = n + 1
-            if k == i:
-                self.own[i, j] = value
+            if not present:
+                if n >= self.capacity[j]:
+                    raise GroupOverflow(f"agent {k} would be member {n + 1} of task {j}'s group in agent {i}'s "
+                                        f"table (L_j = {self.capacity[j]})")
+                if at < n:
+                    members[at + 1: n + 1] = members[at: n]
+                    bids[at + 1: n + 1] = bids[at: n]
+                members[at] = k
+                self.count[i, j] = n + 1
+            bids[at] = value
         elif present:
-            self.members[i, j, at: n - 1] = self.members[i, j, at + 1: n]
-            self.bids[i, j, at: n - 1] = self.bids[i, j, at + 1: n]
-            self.members[i, j, n - 1], self.bids[i, j, n - 1] = EMPTY, 0.0
+            if at < n - 1:
+                members[at: n - 1] = members[at + 1: n]
+                bids[at: n - 1] = bids[at + 1: n]
+            members[n - 1], bids[n - 1] = EMPTY, 0.0
             self.count[i, j] = n - 1
-            if k == i:
-                self.own[i, j] = 0.0
+        else:
+            return
+        if k == i:
+            self.own[i, j] = value if value > 0 else 0.0
 
     def set_winners(self, holders: np.ndarray, tasks: np.ndarray, winner: np.ndarray, bid: np.ndarray) -> None:
         """Overwrite single-agent columns (holder, task) with (winner, bid) pairs in slot 0 (EMPTY clears)."""
