@@ -2,13 +2,13 @@
 
 Thesis chapter 4 stores one bid matrix per agent, X_i[k][j] > 0 ⇔ agent i believes agent k is in task j's group
 with bid X_i[k][j] (eqs. (4.2)–(4.3)). A column (i, ·, j) never holds more than L_j positive entries: a newcomer
-joins only a group with room (n_j < L_j, (3.13)) or in place of the member it displaces (``groups.admit``, called by
-the bid view and by both merges, ``group_merge.two_pass`` and ``kernels.merge``), and a bid displaces that member
-before it joins (``Protocol.bid``). So the table keeps, per holder i and task j, W = max_j L_j *member slots*: the
-member ids in increasing order and their bids, the empty slots last (id ``EMPTY``, bid 0). Memory grows like N·M·L
-instead of the N·N·M of a dense (holder, agent, task) array; a write that would exceed L_j raises
-``GroupOverflow`` instead of growing a column. A single-agent task's winner z_ij is slot 0 of its column (thesis
-Table 3.1's z/y pair).
+joins only a group with room (n_j < L_j, (3.13)) or in place of the member it displaces (``groups.admit``, which the
+bid view and the merge apply: ``group_merge.two_pass`` and its compiled mirror ``kernels.merge``), and a bid
+displaces that member before it joins (``Protocol.bid``). So the table keeps, per holder i and task j,
+W = max_j L_j *member slots* (at most N): the member ids in increasing order and their bids, the empty slots last
+(id ``EMPTY``, bid 0). Memory grows like N·M·L instead of the N·N·M of a dense (holder, agent, task) array; a write
+that would exceed L_j raises ``GroupOverflow`` instead of growing a column. A single-agent task's winner z_ij is
+slot 0 of its column (thesis Table 3.1's z/y pair).
 
 The layout is canonical (sorted members, cleared empty slots), so two tables are equal exactly when the dense
 matrices they stand for are; the compiled merge (``kernels.merge.exchange_all``) writes it in place.

@@ -48,8 +48,8 @@ def memory_estimate(n_agents: int, n_tasks: int, max_bundle: int | None = None) 
     The local tables X_i[k][j] are N·M·W member slots (W = max_j L_j ≤ N, ``group_table``); without L_j at hand they
     are bounded by N·N·M values, which the asynchronous protocol's per-entry times (``async_consensus.Times``) do
     hold, and a round copies them about six times (the snapshot sent, the merge's receiver blocks, the before/after
-    tables of the convergence test). A batched gain computation holds ten
-    (N, P + 1, M) arrays for paths of up to P = max_bundle tasks; observations are N·22·M values, built three times.
+    tables of the convergence test). A batched gain computation holds ten (N, P + 1, M) arrays for paths of up to
+    P = max_bundle tasks; observations are N·22·M values, built three times.
     """
     return sum(_memory_terms(n_agents, n_tasks, max_bundle).values())
 

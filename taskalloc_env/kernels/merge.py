@@ -274,19 +274,17 @@ def _columns_to_visit(count_i: np.ndarray, ids_i: np.ndarray, single: np.ndarray
 
 @jit
 def exchange_all(count: np.ndarray, ids: np.ndarray, values: np.ndarray, own: np.ndarray, stamps: np.ndarray,
-                 known: np.ndarray,
-                 snap_count: np.ndarray, snap_ids: np.ndarray, snap_values: np.ndarray, snap_stamps: np.ndarray,
-                 snap_known: np.ndarray, receiver: np.ndarray, sender: np.ndarray, slot: np.ndarray, now: float,
-                 single: np.ndarray, need: np.ndarray, restricted: np.ndarray, required: np.ndarray,
-                 agent_eq: np.ndarray, canonical: bool) -> int:
+                 known: np.ndarray, snap_count: np.ndarray, snap_ids: np.ndarray, snap_values: np.ndarray,
+                 snap_stamps: np.ndarray, snap_known: np.ndarray, receiver: np.ndarray, sender: np.ndarray,
+                 slot: np.ndarray, now: float, single: np.ndarray, need: np.ndarray, restricted: np.ndarray,
+                 required: np.ndarray, agent_eq: np.ndarray, canonical: bool) -> int:
     """Process deliveries (sorted by receiver, send round, sender) in place; returns the informative messages.
 
     The receivers' groups are the ``GroupTable`` arrays (``count`` (N, M), member ``ids`` and their bid ``values``
     (N, M, W), ids increasing, empty slots EMPTY/0, and each holder's ``own`` bids (N, M)), written in place in the
-    same layout. ``snap_*`` stack the
-    snapshots the messages come from ((Q, N, …)); ``slot[d]`` is delivery d's index into them. A single-agent
-    task's winner and bid are slot 0; a multi-agent column is a member list of at most L_j, so a message costs
-    O(M · L), not O(M · N).
+    same layout. ``snap_*`` stack the snapshots the messages come from ((Q, N, …)); ``slot[d]`` is delivery d's
+    index into them. A single-agent task's winner and bid are slot 0; a multi-agent column is a member list of at
+    most L_j, so a message costs O(M · L), not O(M · N).
     """
     n, m, width = ids.shape
     relayed = np.full((n, n), -np.inf)
