@@ -16,7 +16,9 @@ time would; they are still only comparable within one machine. Each section prin
   log t = c + a log N + b log M (per solve and per consensus round), on all sizes and on those with N ≥ half the
   largest (fixed costs flatten the small ones).
 - memory: tracemalloc's peak of one solve (what numpy and Python allocate; arrays numba allocates inside a compiled
-  kernel are not traced), with the same fit, next to the size of one dense (holder, agent, task) float64 array.
+  kernel are not traced), with the same fit, next to the size of one group table (``group_table.GroupTable``:
+  N·M·L member ids and bids plus N·M counts and own bids, the sparse store of the local tables) and, for comparison,
+  of the dense (holder, agent, task) float64 array it replaced (N·N·M).
 - strategies: the default scenario with CBGA under each network strategy, as ratios to perfect links.
 
 In a tree without ``policies.fast`` (the one before the speed work) the solves are whole env episodes instead.
@@ -158,14 +160,16 @@ def bench_scaling(sizes: Sequence[tuple[int, int]], seeds: int, memory: bool, so
                                         statistics.mean(a.counters.rounds for a, _ in runs))
     unit = "peak MB" if memory else "s"
     header = ["agents × tasks", *(f"{label} {unit}" for label in chosen)]
+    sizes_l = sorted({spec[1] for spec in chosen.values()})
     if memory:
-        header.append("one N·N·M float64 array MB")
+        header += [*(f"one N·M·L group table MB (L = {size})" for size in sizes_l), "one N·N·M float64 array MB"]
     else:
         header += [f"{label.split()[0]} rounds" for label in chosen]
     body = []
     for n, m in sizes:
         row = [f"{n} × {m}", *(f"{figures[label][n, m][0]:.4g}" for label in chosen)]
-        row += [f"{8e-6 * n * n * m:.3g}"] if memory else [f"{figures[label][n, m][1]:.1f}" for label in chosen]
+        row += ([*(f"{1e-6 * n * m * (16 * size + 16):.3g}" for size in sizes_l), f"{8e-6 * n * n * m:.3g}"] if memory
+                else [f"{figures[label][n, m][1]:.1f}" for label in chosen])
         body.append(row)
     fits = []
     top = max(n for n, _ in sizes)

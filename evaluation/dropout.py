@@ -88,7 +88,7 @@ def run_with_failure(env: TaskAllocEnv, policy: Any, seed: int, agent: int) -> t
             seen_round = protocol.round
             if protocol.round == failed_at:         # it failed in this step: its path is frozen from here on
                 held = tuple(int(j) for j in protocol.knowledge.paths[agent])
-            holds = (protocol.knowledge.bids[protocol.alive][:, agent] > 0).any()
+            holds = protocol.knowledge.groups.lists(agent)[protocol.alive].any()
             if protocol.round >= failed_at and released_at is None and not holds:
                 released_at = protocol.round
     allocation = env.unwrapped.evaluate()

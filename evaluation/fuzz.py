@@ -192,9 +192,9 @@ def _record_losses(env: TaskAllocEnv) -> np.ndarray:
 
 def _lost_disagreement(protocol: Any, last_lost: np.ndarray) -> bool:
     """Two live agents hold different tables and the last message from one of them to the other was lost."""
-    bids = protocol.knowledge.bids
+    groups = protocol.knowledge.groups
     live = np.flatnonzero(protocol.alive)
-    return any((last_lost[i, k] or last_lost[k, i]) and not np.array_equal(bids[i], bids[k])
+    return any((last_lost[i, k] or last_lost[k, i]) and not groups.same_table(i, k)
                for i in live for k in live if i < k)
 
 

@@ -37,7 +37,11 @@ from taskalloc_env.stamps import NEVER
 @dataclasses.dataclass
 class Times:
     """Every agent's bid times: t_ij per single-agent task (Johnson §4.1.2, line 822) and one time per entry
-    X_i[m][j] of a multi-agent column (our extension); packed ``stamps``, ``NEVER`` before anything is known."""
+    X_i[m][j] of a multi-agent column (our extension); packed ``stamps``, ``NEVER`` before anything is known.
+
+    ``entry`` stays dense, unlike the groups (``group_table``): a withdrawn or displaced entry keeps its time with a
+    zero bid, so that the withdrawal propagates and is not undone by an older record, so a column's timed entries
+    are every agent that ever joined or left the group, which L_j does not bound."""
 
     task: np.ndarray        # (N, M)
     entry: np.ndarray       # (N, N, M)
@@ -58,7 +62,7 @@ class Message:
     winner: np.ndarray          # (M,) z_kj
     bid: np.ndarray             # (M,) y_kj
     time: np.ndarray            # (M,) t_kj
-    columns: np.ndarray         # (N, M) X_k[m][j]
+    columns: np.ndarray         # (N, M) X_k[m][j], the sender's table as a dense matrix
     entry_times: np.ndarray     # (N, M)
     known: np.ndarray           # (N,) the agents the sender has discovered (thesis §4.2.2, Table 4.5)
     data_items: int
@@ -67,11 +71,11 @@ class Message:
 def compose(kn: LocalKnowledge, times: Times, sender: int, sent: int, tasks: np.ndarray) -> Message:
     """The message of ``sender`` flushing its outgoing buffer ``tasks`` (M,) at tick ``sent``."""
     single = kn.single
-    columns = kn.bids[sender].copy()
+    columns = kn.groups.dense(sender)
     entry_times = times.entry[sender].copy()
     items = 4 * int((tasks & single).sum() + ((entry_times != NEVER) & (tasks & ~single)[None, :]).sum())
-    winner = kn.winner[sender].copy()
-    bid = np.where(winner == NONE, 0.0, columns[np.maximum(winner, 0), np.arange(len(winner))])
+    winner = np.where(single, kn.groups.members[sender, :, 0], NONE)
+    bid = np.where(single, kn.groups.bids[sender, :, 0], 0.0)
     return Message(sender, sent, tasks.copy(), winner, bid, times.task[sender].copy(), columns, entry_times,
                    kn.known[sender].copy(), items)
 
@@ -79,7 +83,7 @@ def compose(kn: LocalKnowledge, times: Times, sender: int, sent: int, tasks: np.
 def listen(kn: LocalKnowledge, times: Times, receivers: np.ndarray, messages: list[Message], now: int,
            cfg: TaskAllocConfig, required_agents: np.ndarray, equipment: Equipment) -> np.ndarray:
     """Process ``messages[r]`` at ``receivers[r]`` (all distinct) at tick ``now``; returns the (R, M) relevant tasks."""
-    m = kn.winner.shape[1]
+    m = len(kn.single)
     carried = np.stack([msg.tasks for msg in messages])
     senders = np.array([msg.sender for msg in messages], dtype=np.int64)
     relevant = np.zeros((len(receivers), m), dtype=bool)
@@ -101,8 +105,8 @@ def _single_tasks(kn: LocalKnowledge, times: Times, receivers: np.ndarray, sende
     """Johnson Table 4.1 on the carried single-agent tasks; writes the receivers' records, returns relevance."""
     idx = np.flatnonzero(kn.single)
     carried = carried[:, idx]
-    z_i = kn.winner[receivers][:, idx]
-    y_i = np.where(z_i == NONE, 0.0, kn.bids[receivers[:, None], np.maximum(z_i, 0), idx[None, :]])
+    z_i = kn.groups.members[receivers[:, None], idx[None, :], 0]
+    y_i = kn.groups.bids[receivers[:, None], idx[None, :], 0]
     t_i = times.task[receivers][:, idx]
     z_k = np.stack([msg.winner[idx] for msg in messages])
     y_k = np.stack([msg.bid[idx] for msg in messages])
@@ -129,8 +133,8 @@ def _group_tasks(kn: LocalKnowledge, times: Times, receivers: np.ndarray, sender
     eq = equipment.subset(idx)
     needed = required_agents[idx]
     carried = carried[:, idx]
-    block = np.ix_(receivers, np.arange(kn.bids.shape[1]), idx)
-    bids_i, t_i = kn.bids[block], times.entry[block]
+    block = np.ix_(receivers, np.arange(times.entry.shape[1]), idx)
+    bids_i, t_i = kn.groups.columns(receivers, idx), times.entry[block]
     bids_k = np.stack([msg.columns[:, idx] for msg in messages])
     t_k = np.stack([msg.entry_times[:, idx] for msg in messages])
     merged, merged_t = merge_stamped(bids_i, t_i, bids_k, t_k, receivers, needed, eq)
@@ -140,6 +144,6 @@ def _group_tasks(kn: LocalKnowledge, times: Times, receivers: np.ndarray, sender
     changed = ((merged != bids_i) | (merged_t != t_i)).any(axis=1)
     reply, reply_t = merge_stamped(bids_k, t_k, merged, merged_t, senders, needed, eq)
     informative = ((reply != bids_k) | (reply_t != t_k)).any(axis=1)
-    kn.bids[block] = merged
+    kn.groups.set_columns(receivers, idx, merged)
     times.entry[block] = merged_t
     return carried & (changed | informative)

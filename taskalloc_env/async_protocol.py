@@ -156,7 +156,7 @@ class AsyncProtocol(Protocol):
         c = self.counters
         self.round += 1
         now = self.round
-        before = kn.bids.copy()
+        before = kn.groups.copy()
         own_before = kn.own_bids() > 0
         bundles_before = [list(b) for b in kn.bundles]
         self._fail(self.dropouts.get(now, ()))
@@ -177,14 +177,14 @@ class AsyncProtocol(Protocol):
             self._reset_quit_timers(before)
             self.inbox |= (self._quittable() & (now - kn.assigned_at == self.cfg.delta + 1)).any(axis=1)
         if kn.quit_blocked.any():
-            kn.quit_blocked &= ~((kn.bids > 0) & (before <= 0)).any(axis=1)
+            kn.quit_blocked &= ~kn.groups.joined(before)
         self._confirm()
         self._schedule_builds()
         self._release_lost()
         keep = self.network.travelling() | set(zip(self.queue[1].tolist(), self.queue[2].tolist()))
         self.payloads = {key: msg for key, msg in self.payloads.items() if key in keep}
         c.rounds = now
-        if not np.array_equal(kn.bids, before) or kn.bundles != bundles_before:
+        if kn.groups != before or kn.bundles != bundles_before:
             c.rounds_to_agreement, c.messages_to_agreement = now, c.messages
         if kn.bundles != self._bundles_seen:
             self._bundles_seen = [list(b) for b in kn.bundles]
@@ -302,13 +302,15 @@ class AsyncProtocol(Protocol):
         kn = self.knowledge
         for k in failed:
             for i in np.flatnonzero(self.alive):
-                single = np.flatnonzero(kn.single & (kn.winner[i] == k))
-                entries = np.flatnonzero(~kn.single & (kn.bids[i, k] > 0))
+                listed = (kn.groups.members[i] == k).any(axis=1)
+                single = np.flatnonzero(kn.single & listed)
+                entries = np.flatnonzero(~kn.single & listed)
                 if not (single.size or entries.size):
                     continue
                 kn.set_single_columns(np.full(single.size, i), single, np.full(single.size, NONE),
                                       np.zeros(single.size))
-                kn.bids[i, k, entries] = 0.0
+                for j in entries:
+                    kn.set_bid(int(i), k, int(j), 0.0)
                 self.times.task[i, single] = stamp(self.round, i)
                 self.times.entry[i, k, entries] = stamp(self.round, i)
                 self.outgoing[i, single] = True

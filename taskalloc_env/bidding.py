@@ -102,7 +102,8 @@ def known_capacity(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equ
 def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment, equipment_match: np.ndarray,
              gain: np.ndarray, slot: np.ndarray, *, prereq_mode: str, require_known_capacity: bool,
              max_bundle: int, fillable: np.ndarray, bid_warping: bool = False, outbid_ties: str = "strict") -> BidView:
-    """The bidding situation of every agent, computed from its local table only.
+    """The bidding situation of every agent, computed from its local table only (the numpy reference of
+    ``refresh_rows``; it reads the multi-agent groups as one dense (N, N, M) block, ``GroupTable.columns``).
 
     ``fillable`` (M,) marks the tasks some team of the scenario can complete: every agent knows all agents'
     equipment (thesis §3.2.1), so the capacity filter applies with everyone known (our choice); with
@@ -110,7 +111,6 @@ def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment
     """
     n, m = gain.shape
     agents = np.arange(n)
-    bids = knowledge.bids
     counts = np.zeros((n, m), dtype=np.int64)
     group_total = np.zeros((n, m))
     lowest_bid = np.zeros((n, m))
@@ -124,7 +124,7 @@ def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment
     displaced_bid = np.zeros((n, m))
 
     single = knowledge.single
-    if single.any():            # one winner per column: read the cache instead of the (N, N, M) tensor
+    if single.any():            # one winner per column: slot 0 of the group
         winner = knowledge.winner[:, single]
         held = knowledge.winning_bid()[:, single]
         counts[:, single] = winner != NONE
@@ -136,7 +136,7 @@ def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment
         displaced_bid[:, single] = held
     multi = ~single
     if multi.any():
-        columns = bids[:, :, multi]
+        columns = knowledge.groups.columns(agents, np.flatnonzero(multi))        # the reference: dense blocks
         members = columns > 0
         counts[:, multi] = members.sum(axis=1)
         group_total[:, multi] = columns.sum(axis=1)
@@ -148,7 +148,8 @@ def bid_view(knowledge: LocalKnowledge, scenario: Scenario, equipment: Equipment
         displaced[:, multi] = admission.displaced
         displaced_bid[:, multi] = admission.displaced_bid
 
-    complete = complete_groups(bids, scenario, equipment) if prereq_mode == "all_complete" else None
+    complete = (complete_groups(knowledge.groups.columns(agents, np.arange(m)), scenario, equipment)
+                if prereq_mode == "all_complete" else None)
     prereqs_met = prerequisites_met(scenario, prereq_mode, counts, complete)
     eligible = equipment_match & prereqs_met & ~in_bundle & fillable[None, :]
     if require_known_capacity:
@@ -197,7 +198,8 @@ def refresh_rows(previous: BidView | None, rows: Sequence[int], knowledge: Local
         arrays = {name: getattr(previous, name) for name in ROW_FIELDS}
     capacity = (known_capacity(knowledge, scenario, equipment, equipment_match) if require_known_capacity
                 else _everyone_known(n, m))
-    bid_rows(np.asarray(rows, dtype=np.int64), knowledge.bids, knowledge.winner, knowledge.single, gain,
+    groups = knowledge.groups
+    bid_rows(np.asarray(rows, dtype=np.int64), groups.count, groups.members, groups.bids, knowledge.single, gain,
              knowledge.quit_blocked, np.array([len(b) for b in knowledge.bundles], dtype=np.int64), equipment_match,
              fillable, capacity, scenario.task_agents.astype(np.int64), equipment.restricted, equipment.required,
              equipment.agent, scenario.task_prereqs, PREREQ_MODES[prereq_mode], int(max_bundle), bid_warping,

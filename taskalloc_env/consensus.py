@@ -27,6 +27,7 @@ import numpy as np
 from taskalloc_env import kernels
 from taskalloc_env.cbba_table import NONE, RESET, UPDATE, decide
 from taskalloc_env.group_merge import merge
+from taskalloc_env.group_table import GroupTable
 from taskalloc_env.groups import Equipment
 from taskalloc_env.kernels.merge import exchange_all
 from taskalloc_env.knowledge import LocalKnowledge
@@ -38,9 +39,7 @@ class Snapshot:
     """Every agent's table as it was sent in one round (a message is its sender's row of each array)."""
 
     round: int
-    bids: np.ndarray            # (N, N, M)
-    winner: np.ndarray          # (N, M)
-    winning_bid: np.ndarray     # (N, M)
+    groups: GroupTable          # the groups of every table, N·M·W (a single-agent task's winner and bid: slot 0)
     stamps: np.ndarray          # (N, N)
     known: np.ndarray           # (N, N): the agents each message names (its timestamps cover every agent it knows,
                                 #         its triples name only known agents; thesis §4.2.2, Table 4.5)
@@ -50,11 +49,10 @@ class Snapshot:
 def snapshot(knowledge: LocalKnowledge, now: int) -> Snapshot:
     """The messages of round ``now``: each agent stamps itself with T, then copies its table."""
     kn = knowledge
-    n = kn.bids.shape[0]
+    n = len(kn.timestamps)
     kn.timestamps[np.arange(n), np.arange(n)] = now
-    bids = kn.bids.copy()
-    return Snapshot(now, bids, kn.winner.copy(), kn.winning_bid(), kn.timestamps.copy(), kn.known.copy(),
-                    3 * (bids > 0).sum(axis=(1, 2)) + n)
+    groups = kn.groups.copy()
+    return Snapshot(now, groups, kn.timestamps.copy(), kn.known.copy(), 3 * groups.count.sum(axis=1) + n)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,23 +78,30 @@ def exchange(knowledge: LocalKnowledge, deliveries: Deliveries, snapshots: dict[
     slot = np.searchsorted(np.array(sent, dtype=np.int64), deliveries.sent)
     stack = [snapshots[r] for r in sent]
 
-    def stacked(name: str) -> np.ndarray:
-        arrays = [getattr(snap, name) for snap in stack]
+    def stacked(arrays: list[np.ndarray]) -> np.ndarray:
         return arrays[0][None] if len(arrays) == 1 else np.stack(arrays)
 
+    g = kn.groups
     informative = exchange_all(
-        kn.bids, kn.winner, kn.timestamps, kn.known, stacked("bids"), stacked("winner"), stacked("winning_bid"),
-        stacked("stamps"), stacked("known"), deliveries.receiver, deliveries.sender, slot, float(now), kn.single,
-        required_agents, equipment.restricted, equipment.required, equipment.agent, table == "canonical")
+        g.count, g.members, g.bids, g.own, kn.timestamps, kn.known, stacked([snap.groups.count for snap in stack]),
+        stacked([snap.groups.members for snap in stack]), stacked([snap.groups.bids for snap in stack]),
+        stacked([snap.stamps for snap in stack]), stacked([snap.known for snap in stack]), deliveries.receiver,
+        deliveries.sender, slot, float(now), kn.single, required_agents, equipment.restricted, equipment.required,
+        equipment.agent, table == "canonical")
     items = sum(int(snap.data_items[deliveries.sender[slot == q]].sum()) for q, snap in enumerate(stack))
     return Traffic(messages=len(deliveries), informative=int(informative), data_items=items)
 
 
 def exchange_reference(knowledge: LocalKnowledge, deliveries: Deliveries, snapshots: dict[int, Snapshot], now: int,
                        required_agents: np.ndarray, equipment: Equipment, table: str = "canonical") -> Traffic:
-    """``exchange`` in numpy, vectorised over the receivers at each inbox position (the reference)."""
+    """``exchange`` in numpy, vectorised over the receivers at each inbox position (the reference).
+
+    The multi-agent columns are merged as dense (receivers, agents, tasks) blocks of the receivers at one inbox
+    position, built from the group tables and written back (``GroupTable.columns``/``set_columns``); no array
+    covers the whole team's N·N·M.
+    """
     kn = knowledge
-    n = kn.bids.shape[0]
+    n = len(kn.timestamps)
     agents = np.arange(n)
     single_idx = np.flatnonzero(kn.single)
     multi_idx = np.flatnonzero(~kn.single)
@@ -121,15 +126,14 @@ def _process(kn: LocalKnowledge, receivers: np.ndarray, senders: np.ndarray, sna
              required_agents: np.ndarray, single_idx: np.ndarray, multi_idx: np.ndarray, multi_eq: Equipment,
              table: str) -> np.ndarray:
     """One message to each of ``receivers`` (all distinct), vectorised; returns which receivers' tables changed."""
-    agents = np.arange(kn.bids.shape[0])
     s_i = kn.timestamps[receivers]
     s_k = snap.stamps[senders]
     changed = np.zeros(len(receivers), dtype=bool)
     if single_idx.size:
-        z_i = kn.winner[receivers][:, single_idx]
-        y_i = np.where(z_i == NONE, 0.0, kn.bids[receivers[:, None], np.maximum(z_i, 0), single_idx[None, :]])
-        z_k = snap.winner[senders][:, single_idx]
-        y_k = snap.winning_bid[senders][:, single_idx]
+        z_i = kn.groups.members[receivers[:, None], single_idx[None, :], 0]
+        y_i = kn.groups.bids[receivers[:, None], single_idx[None, :], 0]
+        z_k = snap.groups.members[senders[:, None], single_idx[None, :], 0]
+        y_k = snap.groups.bids[senders[:, None], single_idx[None, :], 0]
         action = decide(receivers, senders, z_i, y_i, z_k, y_k, s_i, s_k, table)
         new_z = np.where(action == UPDATE, z_k, np.where(action == RESET, NONE, z_i))
         new_y = np.where(action == UPDATE, y_k, np.where(action == RESET, 0.0, y_i))
@@ -138,13 +142,12 @@ def _process(kn: LocalKnowledge, receivers: np.ndarray, senders: np.ndarray, sna
         kn.set_single_columns(receivers[r], single_idx[j], new_z[r, j], new_y[r, j])
         changed |= diff.any(axis=1)
     if multi_idx.size:
-        block = np.ix_(receivers, agents, multi_idx)
-        before = kn.bids[block]
-        after = merge(before, snap.bids[np.ix_(senders, agents, multi_idx)], receivers, senders, s_i, s_k,
+        before = kn.groups.columns(receivers, multi_idx)
+        after = merge(before, snap.groups.columns(senders, multi_idx), receivers, senders, s_i, s_k,
                       required_agents[multi_idx], multi_eq)
         diff = (after != before).any(axis=(1, 2))
         if diff.any():
-            kn.bids[block] = after
+            kn.groups.set_columns(receivers[diff], multi_idx, after[diff])
         changed |= diff
     kn.timestamps[receivers, senders] = now
     kn.known[receivers] |= snap.known[senders]

@@ -235,8 +235,9 @@ class ObservationBuilder:
         if "member_silence" in self.layout.task_names:
             silence = (protocol.round - kn.timestamps) / protocol.silence_timeout               # (N, N)
             np.fill_diagonal(silence, 0.0)
-            members = kn.bids > 0                                                               # (N, N, M)
-            f[:, :, col("member_silence")] = np.minimum(np.where(members, silence[:, :, None], 0.0).max(axis=1), 1.0)
+            ids = kn.groups.members                                                             # (N, M, W)
+            quiet = np.where(ids >= 0, silence[np.arange(len(ids))[:, None, None], np.maximum(ids, 0)], 0.0)
+            f[:, :, col("member_silence")] = np.minimum(quiet.max(axis=2), 1.0)
         if "released" in self.layout.task_names:                # a task not yet released: its whole block is zero
             f[:, :, col("released")] = protocol.released
             f[:, ~protocol.released, :] = 0.0

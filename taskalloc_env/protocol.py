@@ -30,6 +30,7 @@ from taskalloc_env.cbba_table import NONE
 from taskalloc_env.config import TaskAllocConfig, episode_bound
 from taskalloc_env.consensus import Snapshot, Traffic, exchange, snapshot
 from taskalloc_env.errors import ConfigError
+from taskalloc_env.group_table import GroupTable
 from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.network import CommGraph, dropout_schedule, make_network
 from taskalloc_env.releases import release_ticks
@@ -44,9 +45,11 @@ class ProtocolError(ValueError):
 def memory_estimate(n_agents: int, n_tasks: int, max_bundle: int | None = None) -> int:
     """Bytes an episode of this size may hold at once (an upper estimate, float64 everywhere).
 
-    The local tables X_i[k][j] are N·N·M values; a round copies them about six times (the snapshot sent, the
-    merge's receiver blocks, the before/after tables of the convergence test). A batched gain computation holds ten
-    (N, P + 1, M) arrays for paths of up to P = max_bundle tasks; observations are N·22·M values, built three times.
+    The local tables X_i[k][j] are N·M·W member slots (W = max_j L_j ≤ N, ``group_table``); without L_j at hand they
+    are bounded by N·N·M values, which the asynchronous protocol's per-entry times (``async_consensus.Times``) do
+    hold, and a round copies them about six times (the snapshot sent, the merge's receiver blocks, the before/after
+    tables of the convergence test). A batched gain computation holds ten (N, P + 1, M) arrays for paths of up to
+    P = max_bundle tasks; observations are N·22·M values, built three times.
     """
     return sum(_memory_terms(n_agents, n_tasks, max_bundle).values())
 
@@ -108,7 +111,7 @@ class Protocol:
 
     def reset(self) -> None:
         s = self.scenario
-        self.knowledge = LocalKnowledge.empty(s.n_agents, s.n_tasks, s.task_agents == 1,
+        self.knowledge = LocalKnowledge.empty(s.n_agents, s.n_tasks, s.task_agents,
                                               know_everyone=not self.cfg.require_known_capacity)
         self.round = 0
         self.released = self.release_tick <= 0
@@ -131,7 +134,7 @@ class Protocol:
         self._no_quits = np.zeros((s.n_agents, s.n_tasks), dtype=bool)
         self._no_quits.setflags(write=False)
         self._score: TeamScore | None = None
-        self._last_bids = self.knowledge.bids.copy()
+        self._last_groups = self.knowledge.groups.copy()
         self._last_bundles: list[list[int]] = [[] for _ in range(s.n_agents)]
         self._pending_quits: dict[tuple[int, int], None] = {}     # (quitter, task): quits no other agent saw yet
 
@@ -276,7 +279,7 @@ class Protocol:
         self.round += 1
         self._fail_agents(self.dropouts.get(self.round, ()))
         appeared = self._release_tasks()
-        before = kn.bids.copy()
+        before = kn.groups.copy()
         own_before = kn.own_bids() > 0
         snap = snapshot(kn, self.round)
         self._snapshots[self.round] = snap
@@ -297,8 +300,7 @@ class Protocol:
         if self.cfg.task_quitting:
             self._reset_quit_timers(before, counts)
         if kn.quit_blocked.any():          # another agent assigned itself to a quit task: the quitter may return
-            joined = ((kn.bids > 0) & (before <= 0)).any(axis=1)
-            kn.quit_blocked &= ~joined
+            kn.quit_blocked &= ~kn.groups.joined(before)
         c.rounds = self.round
         c.messages += traffic.messages
         c.informative_messages += traffic.informative
@@ -307,10 +309,10 @@ class Protocol:
         c.messages_lost += sent.lost
         c.messages_delayed += sent.delayed
         c.data_items_sent += sent.data_items
-        changed = appeared or not np.array_equal(kn.bids, self._last_bids) or kn.bundles != self._last_bundles
+        changed = appeared or kn.groups != self._last_groups or kn.bundles != self._last_bundles
         if changed:                         # the state from here on is final if nothing changes again
             c.rounds_to_agreement, c.messages_to_agreement = self.round, c.messages
-        self._last_bids = kn.bids.copy()
+        self._last_groups = kn.groups.copy()
         self._last_bundles = [list(b) for b in kn.bundles]
         self.stable_rounds = 0 if changed or self._quit_pending(counts) else self.stable_rounds + 1
         self.converged = (self.stable_rounds >= self.live_graph.diameter + 1 and self._settled()
@@ -324,7 +326,7 @@ class Protocol:
         if not self._pending_quits:
             return None
         quitter, task = np.array(list(self._pending_quits)).T
-        return self.knowledge.bids[:, quitter, task] > 0
+        return self.knowledge.groups.listing(quitter, task)
 
     def _count_seen_quits(self, listing: np.ndarray | None) -> None:
         """``quits_seen``: a pending quit (thesis Alg 9 l. 7, X_i[i][j] = 0) is seen when a merge (Alg 6; Johnson
@@ -335,7 +337,7 @@ class Protocol:
             return
         keys = list(self._pending_quits)
         quitter, task = np.array(keys).T
-        seen = (listing & (self.knowledge.bids[:, quitter, task] <= 0)).any(axis=0)
+        seen = (listing & ~self.knowledge.groups.listing(quitter, task)).any(axis=0)
         for q in np.flatnonzero(seen):
             del self._pending_quits[keys[q]]
         self.counters.quits_seen += int(seen.sum())
@@ -365,7 +367,7 @@ class Protocol:
         last_change = self.counters.rounds_to_agreement
         links = self.live_graph.adjacency
         heard = np.all((self.last_heard > last_change) | ~links)
-        counts_on_failed = bool((self.knowledge.bids[self.alive][:, ~self.alive] > 0).any())
+        counts_on_failed = bool((self.knowledge.groups.listed()[self.alive][:, ~self.alive]).any())
         return bool(heard) and not counts_on_failed and not np.any(self.network.in_flight() <= last_change)
 
     def _fail_agents(self, agents: tuple[int, ...]) -> None:
@@ -387,9 +389,9 @@ class Protocol:
         kn = self.knowledge
         silent = (self.round - kn.timestamps > self.silence_timeout) & self.alive[:, None]
         np.fill_diagonal(silent, False)
-        holders, gone = np.nonzero(silent & (kn.bids > 0).any(axis=2))
+        holders, gone = np.nonzero(silent & kn.groups.listed())
         for i, k in zip(holders, gone):
-            for j in np.flatnonzero(kn.bids[i, k] > 0):
+            for j in np.flatnonzero((kn.groups.members[i] == k).any(axis=1)):
                 kn.set_bid(int(i), int(k), int(j), 0.0)
             self.counters.silent_releases += 1
 
@@ -404,14 +406,14 @@ class Protocol:
                 kn.release(i, lost, self.cfg.release_order)
                 self._dirty.add(i)
 
-    def _reset_quit_timers(self, before: np.ndarray, counts: np.ndarray | None = None) -> None:
-        """H_i[j] = T when column j of an incomplete held group changed (Alg 9 lines 4–5, ``reset_on``); ``counts``
-        are the tables' member counts after the exchange."""
+    def _reset_quit_timers(self, before: GroupTable, counts: np.ndarray | None = None) -> None:
+        """H_i[j] = T when column j of an incomplete held group changed (Alg 9 lines 4–5, ``reset_on``); ``before``
+        are the groups before the exchange, ``counts`` the tables' member counts after it."""
         kn = self.knowledge
         if self.cfg.reset_on == "additions":
-            updated = ((kn.bids > 0) & ~(before > 0)).any(axis=1)
+            updated = kn.groups.joined(before)
         else:
-            updated = (kn.bids != before).any(axis=1)
+            updated = kn.groups.changed(before)
         kn.assigned_at[updated & self._quittable(counts)] = self.round
 
     def _quit_pending(self, counts: np.ndarray | None) -> bool:
@@ -432,6 +434,6 @@ class Protocol:
     # -- agreement -------------------------------------------------------------------------------------------------
     def agreement(self) -> bool:
         """Every pair of live agents in one connected component holds the same table (thesis §3.2.3's consensus)."""
-        bids = self.knowledge.bids
+        groups = self.knowledge.groups
         comp = self.live_graph.component
-        return all(np.array_equal(bids[i], bids[comp[i]]) for i in np.flatnonzero(self.alive))
+        return all(groups.same_table(i, comp[i]) for i in np.flatnonzero(self.alive))

@@ -17,6 +17,7 @@ import numpy as np
 from taskalloc_env import Agent, Scenario, Task, TaskAllocEnv
 from taskalloc_env.cbba_table import NONE
 from taskalloc_env.groups import Equipment
+from taskalloc_env.knowledge import LocalKnowledge
 
 TOL = 1e-9
 
@@ -203,18 +204,30 @@ def run_episode(env: TaskAllocEnv, policy, seed: int | None, *, check: Callable[
     return Episode(env.evaluate(), total, steps, quits, bids)
 
 
+def tables(kn: LocalKnowledge) -> np.ndarray:
+    """(N, N, M) every agent's matrix X_i[k][j] as a dense array (``GroupTable.dense``), for small cases."""
+    return np.stack([kn.groups.dense(i) for i in range(len(kn.timestamps))])
+
+
 def check_tables(env: TaskAllocEnv) -> None:
     """Invariants that hold in every agent's local table after every step (docs/algorithm.md)."""
     p = env.protocol
     s = p.scenario
     kn = p.knowledge
-    bids = kn.bids
+    bids = tables(kn)
     n, m = s.n_agents, s.n_tasks
     present = bids > 0
     counts = present.sum(axis=1)
     over = np.argwhere(counts > s.task_agents[None, :])
     assert over.size == 0, f"capacity (thesis (3.4)): agent/task {over.tolist()} has more than L_j members in its table"
-    # the single-agent winner cache agrees with the matrix (one winner per single-agent task)
+    # the group table's layout: members in increasing id order, then cleared empty slots (group_table)
+    g = kn.groups
+    slots = np.arange(g.members.shape[2])[None, None, :] < g.count[:, :, None]
+    assert np.all((g.members >= 0) == slots) and np.all(g.bids[~slots] == 0) and np.all(g.bids[slots] > 0)
+    assert np.all((np.diff(g.members, axis=2) > 0) | ~slots[:, :, 1:]), "members out of increasing id order"
+    holder = np.arange(n)[:, None, None]
+    np.testing.assert_array_equal(g.own, np.where(g.members == holder, g.bids, 0.0).max(axis=2), err_msg="own bids")
+    # the single-agent winner (slot 0) agrees with the matrix (one winner per single-agent task)
     for i in range(n):
         for j in np.flatnonzero(s.task_agents == 1):
             holders = np.flatnonzero(present[i, :, j])
@@ -272,10 +285,10 @@ def check_converged_allocation(env: TaskAllocEnv, episode: Episode, *, full_comm
     assert p.round <= p.max_rounds
     if full_comms:
         for i in range(1, s.n_agents):
-            assert np.array_equal(kn.bids[i], kn.bids[0]), f"agreement (thesis §3.2.3): agent {i} differs from agent 0"
+            assert kn.groups.same_table(i, 0), f"agreement (thesis §3.2.3): agent {i} differs from agent 0"
         own = kn.own_bids()
         for k in range(s.n_agents):
-            np.testing.assert_array_equal(kn.bids[k], own, err_msg="self-consistency: X_k[i] != X_i[i]")
+            np.testing.assert_array_equal(kn.groups.dense(k), own, err_msg="self-consistency: X_k[i] != X_i[i]")
         assert not alloc.conflicts, f"conflicts under global communication (thesis §4.3): {alloc.conflicts}"
     scoring = scoring_options(env)
     ref_score, ref_valid = reference_team_score(s, alloc.paths, conflict_policy=env.config.conflict_policy, **scoring)

@@ -13,7 +13,16 @@ import math
 
 import numpy as np
 import pytest
-from helpers import agent, build, check_converged_allocation, reference_team_score, replay, run_episode, task
+from helpers import (
+    agent,
+    build,
+    check_converged_allocation,
+    reference_team_score,
+    replay,
+    run_episode,
+    tables,
+    task,
+)
 
 from policies import CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy, exact, make_policy, rollout, sgama
 from taskalloc_env import TaskAllocConfig, TaskAllocEnv, generate
@@ -82,7 +91,7 @@ def test_appendix_a1_cbba_bundle_phase():
     policy.start(env)
     assert policy.act(obs)["uav_0"] == 1 + 4
     act_on(env, {"uav_0": 1 + 4})
-    assert kn.bids[0, 0, 4] == pytest.approx(67.0)
+    assert kn.groups.bid(0, 0, 4) == pytest.approx(67.0)
 
 
 def test_appendix_a2_cbga_bundle_phases():
@@ -94,19 +103,19 @@ def test_appendix_a2_cbga_bundle_phases():
     kn = env.protocol.knowledge
     policy = CBGAPolicy()
     policy.start(env)
-    np.testing.assert_allclose(kn.bids[0, :2], [[73.98, 71.56, 72.44, 0, 0], [71.98, 71.56, 72.44, 0, 0]])
-    assert not kn.bids[0, 2:].any()
+    np.testing.assert_allclose(tables(kn)[0, :2], [[73.98, 71.56, 72.44, 0, 0], [71.98, 71.56, 72.44, 0, 0]])
+    assert not tables(kn)[0, 2:].any()
     assert policy.act(obs)["uav_0"] == 0, "A1 has nothing to add in the second bundle phase"
     assert kn.bundles[1] == [0, 2, 1], "A2 kept itself on all three tasks (Table A.8)"
     obs = act_on(env, {})[0]
     assert env.protocol.round == 2
-    members = [np.flatnonzero(kn.bids[0, :, j] > 0).tolist() for j in range(5)]
+    members = [np.flatnonzero(tables(kn)[0, :, j] > 0).tolist() for j in range(5)]
     assert members == [[0, 1], [1, 2], [1, 2], [2], []]                      # Table A.9 without A1's new T5 bid
     assert kn.bundles[0] == [0]
     assert obs["uav_0"]["action_mask"][1:6].astype(bool).tolist() == [False, False, False, False, True]
     assert policy.act(obs)["uav_0"] == 1 + 4
     act_on(env, {"uav_0": 1 + 4})
-    assert kn.bids[0, 0, 4] == pytest.approx(67.0)
+    assert kn.groups.bid(0, 0, 4) == pytest.approx(67.0)
 
 
 # -- Fig 5.3: team-focused choice (thesis §5.2.1, (5.5), Fig 5.3) ---------------------------------------------------
@@ -129,12 +138,12 @@ def fig_5_3_env() -> TaskAllocEnv:
 def test_fig_5_3_team_bidding_picks_the_nearly_full_group(policy, choice):
     env, obs = fig_5_3_env()
     kn = env.protocol.knowledge
-    assert sorted(kn.bids[0, :, 2][kn.bids[0, :, 2] > 0].tolist()) == [80.0, 90.0]
+    assert sorted(tables(kn)[0, :, 2][tables(kn)[0, :, 2] > 0].tolist()) == [80.0, 90.0]
     assert obs["uav_0"]["action_mask"][1:4].tolist() == [0, 1, 1]
     policy.start(env)
     assert policy.act(obs)["uav_0"] == choice
     act_on(env, {"uav_0": choice})
-    assert kn.bids[0, 0, choice - 1] == pytest.approx({2: 60.0, 3: 50.0}[choice]), "the stored bid is c_ij"
+    assert kn.groups.bid(0, 0, choice - 1) == pytest.approx({2: 60.0, 3: 50.0}[choice]), "the stored bid is c_ij"
 
 
 def test_team_value_net_does_not_reward_outbidding_a_single_agent_task():

@@ -66,8 +66,8 @@ def test_bid_mask_and_merge_admit_the_same_bids(mask, outbid_ties, case, data):
     n, m = table.shape
     receiver = data.draw(st.sampled_from([k for k in range(n) if k != i]))
     equipment = Equipment(scenario.agent_equipment, scenario.task_equipment)
-    knowledge = LocalKnowledge.empty(n, m, scenario.task_agents == 1, know_everyone=True)
-    knowledge.bids[i] = table
+    knowledge = LocalKnowledge.empty(n, m, scenario.task_agents, know_everyone=True)
+    knowledge.groups.set_columns(np.array([i]), np.arange(m), table[None])
     gain = np.zeros((n, m))
     gain[i] = gains
     build = bid_view if mask == "reference" else functools.partial(refresh_rows, None, range(n))

@@ -40,7 +40,7 @@ def rounds(draw):
     values = st.sampled_from([0.0, 0.0, 10.0, 20.0, 20.0, 35.0])
 
     def table() -> LocalKnowledge:
-        kn = LocalKnowledge.empty(n, m, single, know_everyone=draw(st.booleans()))
+        kn = LocalKnowledge.empty(n, m, need, know_everyone=draw(st.booleans()))
         for i in range(n):
             for j in range(m):
                 holders = [k for k in range(n) if draw(values) > 0][: need[j]]
@@ -54,8 +54,8 @@ def rounds(draw):
     senders = [table() for _ in range(draw(st.integers(1, 2)))]
     snaps = {}
     for r, kn in enumerate(senders, start=1):
-        snaps[r] = Snapshot(r, kn.bids.copy(), kn.winner.copy(), kn.winning_bid(), kn.timestamps.copy(),
-                            kn.known.copy(), 3 * (kn.bids > 0).sum(axis=(1, 2)) + n)
+        snaps[r] = Snapshot(r, kn.groups.copy(), kn.timestamps.copy(), kn.known.copy(),
+                            3 * kn.groups.count.sum(axis=1) + n)
     pairs = [(i, k) for i in range(n) for k in range(n) if i != k and draw(st.booleans())]
     sent = np.array([draw(st.integers(1, len(senders))) for _ in pairs], dtype=np.int64)
     rec = np.array([i for i, _ in pairs], dtype=np.int64)
@@ -66,7 +66,7 @@ def rounds(draw):
 
 
 def clone(kn: LocalKnowledge) -> LocalKnowledge:
-    return LocalKnowledge(kn.bids.copy(), kn.winner.copy(), kn.timestamps.copy(), kn.known.copy(),
+    return LocalKnowledge(kn.groups.copy(), kn.timestamps.copy(), kn.known.copy(),
                           [list(b) for b in kn.bundles], [list(p) for p in kn.paths], kn.assigned_at.copy(),
                           kn.quit.copy(), kn.quit_blocked.copy(), kn.single.copy())
 
@@ -79,7 +79,9 @@ def test_compiled_exchange_equals_the_reference(case):
     got = exchange(compiled, deliveries, snaps, 9, need, equipment, table)
     want = exchange_reference(reference, deliveries, snaps, 9, need, equipment, table)
     assert got == want
-    for name in ("bids", "winner", "timestamps", "known"):
+    for name in ("count", "members", "bids", "own"):
+        np.testing.assert_array_equal(getattr(compiled.groups, name), getattr(reference.groups, name), err_msg=name)
+    for name in ("winner", "timestamps", "known"):
         np.testing.assert_array_equal(getattr(compiled, name), getattr(reference, name), err_msg=name)
 
 
@@ -171,14 +173,14 @@ def views(draw):
         tasks.append(Task((1.0, 1.0, 0.0), 100.0, 0.0, 50.0, 1.0, agents=need, equipment=equipment,
                           prerequisites=prereqs))
     scenario = Scenario.from_entities(agents, tasks, equipment_names=("A", "B") if typed else ())
-    kn = LocalKnowledge.empty(n, m, scenario.task_agents == 1, know_everyone=draw(st.booleans()))
+    kn = LocalKnowledge.empty(n, m, scenario.task_agents, know_everyone=draw(st.booleans()))
     values = st.sampled_from([0.0, 0.0, 10.0, 20.0, 20.0, 35.0])
     for i in range(n):
         for j in range(m):
             holders = [k for k in range(n) if draw(values) > 0][: scenario.task_agents[j]]
             for k in holders:
                 kn.set_bid(i, k, j, draw(values) or 5.0)
-        kn.bundles[i] = [int(j) for j in np.flatnonzero(kn.bids[i, i] > 0)]
+        kn.bundles[i] = [int(j) for j in np.flatnonzero(kn.own_bids()[i] > 0)]
         kn.known[i] = [draw(st.booleans()) for _ in range(n)]
         kn.known[i, i] = True
     kn.quit_blocked[:] = np.array([[draw(st.integers(0, 4)) == 0 for _ in range(m)] for _ in range(n)])
@@ -207,14 +209,15 @@ def test_compiled_view_rows_equal_the_reference(case):
 
     first = refresh_rows(None, [], kn, *args, **options)
     same(first, bid_view(kn, *args, **options))
-    if kn.bids[row, row, 0] > 0:                                                # only this row changes
+    if kn.groups.bid(row, row, 0) > 0:                                                # only this row changes
         kn.set_bid(row, row, 0, 0.0)
     else:                                       # row joins task 0, displacing its lowest member if the group is full
-        members = np.flatnonzero(kn.bids[row, :, 0] > 0)
+        column = kn.groups.dense(row)[:, 0]
+        members = np.flatnonzero(column > 0)
         if len(members) >= scenario.task_agents[0]:
-            kn.set_bid(row, int(members[np.argmin(kn.bids[row, members, 0])]), 0, 0.0)
+            kn.set_bid(row, int(members[np.argmin(column[members])]), 0, 0.0)
         kn.set_bid(row, row, 0, 25.0)
-    kn.bundles[row] = [int(j) for j in np.flatnonzero(kn.bids[row, row] > 0)]
+    kn.bundles[row] = [int(j) for j in np.flatnonzero(kn.own_bids()[row] > 0)]
     kn.quit_blocked[row] = ~kn.quit_blocked[row]
     same(refresh_rows(first, [row], kn, *args, **options), bid_view(kn, *args, **options))
 

@@ -20,6 +20,7 @@ from helpers import (
     reference_team_score,
     run_episode,
     scoring_options,
+    tables,
 )
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -103,7 +104,7 @@ class StableBids:
     def __call__(self, env: TaskAllocEnv) -> None:
         check_tables(env)
         kn = env.protocol.knowledge
-        held = {(i, j): float(kn.bids[i, i, j]) for i, b in enumerate(kn.bundles) for j in b}
+        held = {(i, j): float(kn.groups.bid(i, i, j)) for i, b in enumerate(kn.bundles) for j in b}
         for key, value in held.items():
             if key in self.held:
                 assert value == self.held[key], f"agent/task {key}: stored bid changed {self.held[key]} -> {value}"
@@ -150,7 +151,7 @@ def test_limited_communication(kw, variant, seed):
     assert episode.allocation.converged
     comp = p.graph.component
     for i in range(s.n_agents):
-        assert np.array_equal(p.knowledge.bids[i], p.knowledge.bids[comp[i]]), f"agent {i} disagrees in its component"
+        assert p.knowledge.groups.same_table(i, comp[i]), f"agent {i} disagrees in its component"
     if env.config.require_known_capacity:
         for i in np.flatnonzero(p.graph.degree == 0):
             assert not any(s.task_agents[j] > 1 for j in p.knowledge.bundles[i])
@@ -182,7 +183,7 @@ def expected_bid_mask(env: TaskAllocEnv, i: int) -> tuple[np.ndarray, np.ndarray
     s = p.scenario
     cfg = env.config
     kn = p.knowledge
-    table = kn.bids[i]
+    table = kn.groups.dense(i)
     path = kn.paths[i]
     allowed = np.zeros(s.n_tasks, dtype=bool)
     gains = np.zeros(s.n_tasks)
@@ -240,7 +241,7 @@ def expected_bid_mask(env: TaskAllocEnv, i: int) -> tuple[np.ndarray, np.ndarray
 def warped_bid(env: TaskAllocEnv, i: int, gain: float) -> float:
     """The bid i would store: c_ij, or with ``bid_warping`` no more than any bid it already holds in its bundle."""
     kn = env.protocol.knowledge
-    held = [kn.bids[i, i, b] for b in kn.bundles[i]]
+    held = [kn.groups.bid(i, i, b) for b in kn.bundles[i]]
     return min([gain, *held]) if env.config.bid_warping else gain
 
 
@@ -259,8 +260,8 @@ def expected_quit_mask(env: TaskAllocEnv, i: int) -> np.ndarray:
     if not env.config.task_quitting:
         return out
     for j in range(s.n_tasks):
-        members = int((kn.bids[i, :, j] > 0).sum())
-        out[j] = (s.task_agents[j] > 1 and kn.bids[i, i, j] > 0 and not kn.quit[i, j]
+        members = int((tables(kn)[i, :, j] > 0).sum())
+        out[j] = (s.task_agents[j] > 1 and kn.groups.bid(i, i, j) > 0 and not kn.quit[i, j]
                   and members < s.task_agents[j] and p.round - kn.assigned_at[i, j] > env.config.delta)
     return out
 
@@ -268,7 +269,7 @@ def expected_quit_mask(env: TaskAllocEnv, i: int) -> np.ndarray:
 def team_value(env: TaskAllocEnv, i: int, j: int, gain: float, literal: bool) -> float:
     """(5.5): Σ_k X_i[k][j] (− the bid i would displace, ``net``) + c_ij."""
     s = env.protocol.scenario
-    table = env.protocol.knowledge.bids[i]
+    table = env.protocol.knowledge.groups.dense(i)
     members = [int(k) for k in np.flatnonzero(table[:, j] > 0)]
     total = float(table[members, j].sum())
     displaced = 0.0
@@ -337,7 +338,7 @@ def test_masks_gains_and_choices_follow_the_spec(kw, variant, seed):
         for a, gain in before.items():
             i, j = env.agent_index[a], actions[a] - 1
             if env.config.consensus == "sync":      # the round cannot end in a step where someone bids
-                assert kn.bids[i, i, j] == gain, "the stored bid is c_ij, or its warped value (bid_warping)"
+                assert kn.groups.bid(i, i, j) == gain, "the stored bid is c_ij, or its warped value (bid_warping)"
     assert env.evaluate().converged
 
 

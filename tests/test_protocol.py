@@ -13,7 +13,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from helpers import agent, build, check_tables, run_episode, task
+from helpers import agent, build, check_tables, run_episode, tables, task
 
 from policies import CBBAPolicy, CBGAPolicy, PassPolicy
 from taskalloc_env import TaskAllocConfig, TaskAllocEnv, generate
@@ -56,13 +56,13 @@ def test_outbid_release_single_agent_tasks(order, kept):
     kn = p.knowledge
     assert kn.bundles[0] == kept and kn.paths[0] == kept
     # the lost task keeps the new winner's entry (only n > n̄ is reset; Johnson (3.11) prints n ≥ n̄)
-    assert kn.winner[0, 0] == 1 and kn.bids[0, 1, 0] == pytest.approx(95.0)
+    assert kn.winner[0, 0] == 1 and kn.groups.bid(0, 1, 0) == pytest.approx(95.0)
     # released tasks: own bids zeroed in the same iteration, no winner left behind
     for j in {0, 1, 2} - set(kept):
-        assert kn.bids[0, 0, j] == 0
+        assert kn.groups.bid(0, 0, j) == 0
     assert kn.winner[0, 1] == NONE
     for j in kept:
-        assert kn.bids[0, 0, j] == pytest.approx(80.0) and kn.winner[0, j] == 0
+        assert kn.groups.bid(0, 0, j) == pytest.approx(80.0) and kn.winner[0, j] == 0
     check_consistency(p)
 
 
@@ -77,17 +77,17 @@ def test_outbid_release_multi_agent_eviction(order, kept):
     p.end_round()
     kn = p.knowledge
     assert kn.bundles[0] == kept
-    assert kn.bids[0, 0, 0] == 0
-    assert kn.bids[0, 1, 0] == pytest.approx(95.0) and kn.bids[0, 2, 0] == pytest.approx(95.0)
+    assert kn.groups.bid(0, 0, 0) == 0
+    assert kn.groups.bid(0, 1, 0) == pytest.approx(95.0) and kn.groups.bid(0, 2, 0) == pytest.approx(95.0)
     for j in {1, 2} - set(kept):
-        assert kn.bids[0, 0, j] == 0
+        assert kn.groups.bid(0, 0, j) == 0
     check_consistency(p)
 
 
 def check_consistency(p: Protocol) -> None:
     kn = p.knowledge
     for i, b in enumerate(kn.bundles):
-        assert set(b) == set(np.flatnonzero(kn.bids[i, i] > 0).tolist())
+        assert set(b) == set(np.flatnonzero(tables(kn)[i, i] > 0).tolist())
         assert sorted(b) == sorted(kn.paths[i])
 
 
@@ -107,7 +107,7 @@ def test_bid_on_a_full_group_displaces_the_minimum_locally():
     p.bid(2, 0)                                       # 80
     p.end_round()
     p.bid(0, 0)                                       # 95 beats the minimum 80 of agent 2
-    assert p.knowledge.bids[0, 2, 0] == 0 and p.knowledge.bids[0, 0, 0] > 0
+    assert p.knowledge.groups.bid(0, 2, 0) == 0 and p.knowledge.groups.bid(0, 0, 0) > 0
     assert p.knowledge.member_counts()[0, 0] == 2
 
 
@@ -125,10 +125,10 @@ def test_bid_reaches_the_far_end_after_d_rounds(agents_per_task):
     p = line_protocol(5, [task(2, agents=agents_per_task)])
     assert p.graph.diameter == 4
     p.bid(0, 0)
-    bid = p.knowledge.bids[0, 0, 0]
+    bid = p.knowledge.groups.bid(0, 0, 0)
     for r in range(1, 6):
         p.end_round()
-        knows = p.knowledge.bids[:, 0, 0] == bid
+        knows = tables(p.knowledge)[:, 0, 0] == bid
         assert knows.tolist() == [a <= r for a in range(5)], f"after round {r}"
 
 
@@ -173,7 +173,7 @@ def test_relayed_release_propagates():
     p.end_round()                                    # round 1
     kn = p.knowledge
     assert kn.bundles[2] == [], "agent 2 lost T0 and released T1 that was added after it"
-    assert kn.bids[2, 2].tolist() == [0.0, 0.0]
+    assert tables(kn)[2, 2].tolist() == [0.0, 0.0]
     p.end_round()                                    # round 2: agent 0 hears agent 1's round-1 view
     assert kn.winner[0].tolist() == [1, 2]
     p.end_round()                                    # round 3: the release reaches agent 0
@@ -251,7 +251,7 @@ def test_message_and_data_item_accounting():
     p.bid(0, 0)
     p.bid(1, 0)
     p.bid(3, 1)
-    positive = (p.knowledge.bids > 0).sum(axis=(1, 2))          # before the round: 1, 1, 0, 1
+    positive = (tables(p.knowledge) > 0).sum(axis=(1, 2))          # before the round: 1, 1, 0, 1
     degree = np.array([1, 2, 2, 1])
     traffic = p.end_round()
     assert traffic.messages == degree.sum() == 6
@@ -266,7 +266,7 @@ def test_converged_message_size_formula():
     env = TaskAllocEnv(scenario=s, agents_per_task=2)
     run_episode(env, CBGAPolicy(), seed=0)
     p = env.protocol
-    members = (p.knowledge.bids[0] > 0).sum()
+    members = (p.knowledge.groups.dense(0) > 0).sum()
     traffic = p.end_round()
     per_message = 3 * members + s.n_agents
     assert traffic.data_items == traffic.messages * per_message
@@ -312,7 +312,7 @@ def test_quit_releases_later_tasks_and_happens_once():
     released = p.quit(0, 0)
     kn = p.knowledge
     assert released == [1]
-    assert kn.bundles[0] == [] and kn.bids[0, 0, 0] == 0 and kn.bids[0, 0, 1] == 0 and kn.quit[0, 0]
+    assert kn.bundles[0] == [] and kn.groups.bid(0, 0, 0) == 0 and kn.groups.bid(0, 0, 1) == 0 and kn.quit[0, 0]
     assert p.view().can_bid[0, 0]
     p.bid(0, 0)
     for _ in range(4):
@@ -321,7 +321,7 @@ def test_quit_releases_later_tasks_and_happens_once():
     with pytest.raises(ProtocolError):
         p.quit(0, 0)
     # the quit propagated: the other agents no longer list agent 0 from before (they list the new bid)
-    assert kn.bids[1, 0, 0] == kn.bids[0, 0, 0]
+    assert kn.groups.bid(1, 0, 0) == kn.groups.bid(0, 0, 0)
 
 
 def test_quit_preconditions():
@@ -385,11 +385,11 @@ def test_a_quit_the_others_list_is_seen():
     p.bid(2, 0)
     for _ in range(3):
         p.end_round()
-    assert (p.knowledge.bids[:, 0, 0] > 0).all()
+    assert (tables(p.knowledge)[:, 0, 0] > 0).all()
     p.quit(0, 0)
     assert (p.counters.quits, p.counters.quits_seen) == (1, 0)
     p.end_round()
-    assert (p.knowledge.bids[:, 0, 0] == 0).all()
+    assert (tables(p.knowledge)[:, 0, 0] == 0).all()
     assert (p.counters.quits, p.counters.quits_seen) == (1, 1)
     for _ in range(3):
         p.end_round()
@@ -408,7 +408,7 @@ def test_a_quit_re_bid_in_the_same_bundle_phase_is_not_seen():
     p.bid(0, 0)
     for _ in range(3):
         p.end_round()
-        assert (p.knowledge.bids[:, 0, 0] > 0).all()
+        assert (tables(p.knowledge)[:, 0, 0] > 0).all()
     assert (p.counters.quits, p.counters.quits_seen) == (1, 0)
 
 
@@ -487,7 +487,7 @@ def test_cbba_converges_within_the_round_bound(kind, diameter, seed):
     bound = min(s.n_tasks, s.n_tasks * s.n_agents) * diameter
     assert ep.allocation.counters.rounds - (diameter + 1) <= bound
     for i in range(1, s.n_agents):
-        assert np.array_equal(p.knowledge.bids[i], p.knowledge.bids[0])
+        assert np.array_equal(p.knowledge.groups.dense(i), p.knowledge.groups.dense(0))
 
 
 # -- Appendix A (thesis App. A.1–A.2, Tables A.1–A.10; ties to the higher id, §3.2.3) ----------------------------------
@@ -497,7 +497,7 @@ T1, T2, T3, T4, T5 = 0, 1, 2, 3, 4
 
 def appendix_knowledge(single: bool) -> tuple[LocalKnowledge, CommGraph, Equipment, np.ndarray]:
     """4 agents on the line A1–A2–A3–A4, 5 tasks (L = 1 for A.1, L = 2 for A.2)."""
-    kn = LocalKnowledge.empty(4, 5, np.full(5, single), know_everyone=True)
+    kn = LocalKnowledge.empty(4, 5, np.full(5, 1 if single else 2), know_everyone=True)
     graph = CommGraph(line_positions(4), comm_range=1.0)
     eq = Equipment(np.zeros((4, 0), dtype=bool), np.zeros((5, 0), dtype=np.int64))
     return kn, graph, eq, np.full(5, 1 if single else 2)
@@ -532,7 +532,7 @@ def test_appendix_a1_cbba_consensus_steps():
 
 
 def multi_view(kn: LocalKnowledge, i: int) -> list[list[float]]:
-    return np.round(kn.bids[i], 2).tolist()
+    return np.round(kn.groups.dense(i), 2).tolist()
 
 
 def test_appendix_a2_cbga_consensus_steps():

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from taskalloc_env.kernels import jit
-from taskalloc_env.kernels.merge import NONE, _outbids, _replaceable
+from taskalloc_env.kernels.merge import NONE, _outbids, _replaceable, _value_of
 
 ALL_HAVE_BID, ALL_COMPLETE, ANY_HAS_BID = 0, 1, 2
 PREREQ_MODES = {"all_have_bid": ALL_HAVE_BID, "all_complete": ALL_COMPLETE, "any_has_bid": ANY_HAS_BID}
@@ -38,56 +38,45 @@ def _fills(have: np.ndarray, newcomer: int, required: np.ndarray, agent_eq: np.n
 
 
 @jit
-def bid_rows(rows: np.ndarray, bids: np.ndarray, winner: np.ndarray, single: np.ndarray, gain: np.ndarray,
-             quit_blocked: np.ndarray, bundle_sizes: np.ndarray, equipment_match: np.ndarray, fillable: np.ndarray,
-             capacity: np.ndarray, need: np.ndarray, restricted: np.ndarray, required: np.ndarray,
-             agent_eq: np.ndarray, prereqs: np.ndarray, prereq_mode: int, max_bundle: int, warping: bool,
-             strict: bool, bid: np.ndarray, outbid: np.ndarray, eligible: np.ndarray, prereqs_met: np.ndarray,
-             members: np.ndarray, group_total: np.ndarray, lowest_bid: np.ndarray, displaced: np.ndarray,
-             displaced_bid: np.ndarray, in_bundle: np.ndarray) -> None:
-    """Fill rows ``rows`` of the (N, M) view arrays in place (see ``bidding.BidView`` for their meaning)."""
-    n, _, m = bids.shape
+def bid_rows(rows: np.ndarray, count: np.ndarray, ids: np.ndarray, values: np.ndarray, single: np.ndarray,
+             gain: np.ndarray, quit_blocked: np.ndarray, bundle_sizes: np.ndarray, equipment_match: np.ndarray,
+             fillable: np.ndarray, capacity: np.ndarray, need: np.ndarray, restricted: np.ndarray,
+             required: np.ndarray, agent_eq: np.ndarray, prereqs: np.ndarray, prereq_mode: int, max_bundle: int,
+             warping: bool, strict: bool, bid: np.ndarray, outbid: np.ndarray, eligible: np.ndarray,
+             prereqs_met: np.ndarray, members: np.ndarray, group_total: np.ndarray, lowest_bid: np.ndarray,
+             displaced: np.ndarray, displaced_bid: np.ndarray, in_bundle: np.ndarray) -> None:
+    """Fill rows ``rows`` of the (N, M) view arrays in place (see ``bidding.BidView`` for their meaning) from the
+    ``GroupTable`` arrays: ``count`` (N, M), member ``ids`` and their bid ``values`` (N, M, W), ids increasing."""
+    m = count.shape[1]
     n_items = required.shape[1]
     any_prereqs = prereqs.any()
-    total = np.zeros(m)
-    lowest = np.zeros(m)
-    victim = np.zeros(m, dtype=np.int64)
     have = np.zeros((m, n_items), dtype=np.int64)                # items the members carry, per column
     for i in rows:
         lowest_own = np.inf
         for j in range(m):
-            in_bundle[i, j] = bids[i, i, j] > 0
-            if in_bundle[i, j] and bids[i, i, j] < lowest_own:
-                lowest_own = bids[i, i, j]
-        # one pass over i's table in memory order: member count, total, lowest bid and lowest replaceable member
-        members[i, :] = 0
-        total[:] = 0.0
-        lowest[:] = np.inf
-        victim[:] = -1
+            in_bundle[i, j] = _value_of(i, count[i, j], ids[i, j], values[i, j]) > 0
+            if in_bundle[i, j]:
+                lowest_own = min(lowest_own, _value_of(i, count[i, j], ids[i, j], values[i, j]))
         have[:, :] = 0
-        for k in range(n):
-            for j in range(m):
-                value = bids[i, k, j]
-                if not value > 0:
-                    continue
+        for j in range(m):
+            # one pass over the members in id order: count, total, lowest bid and lowest replaceable member
+            total, lowest, victim, victim_bid = 0.0, np.inf, -1, 0.0
+            for c in range(count[i, j]):
+                k, value = ids[i, j, c], values[i, j, c]
                 for e in range(n_items):
                     if agent_eq[k, e]:
                         have[j, e] += 1
-                if single[j]:
-                    continue
-                members[i, j] += 1
-                total[j] += value
-                lowest[j] = min(lowest[j], value)
+                total += value
+                lowest = min(lowest, value)
                 if (not restricted[j] or _replaceable(k, i, required[j], agent_eq)) \
-                        and (victim[j] < 0 or value < bids[i, victim[j], j]):
-                    victim[j] = k
-        for j in range(m):
+                        and (victim < 0 or value < victim_bid):
+                    victim, victim_bid = k, value
             b = min(gain[i, j], lowest_own) if warping else gain[i, j]
             bid[i, j] = b
             if single[j]:
-                w = winner[i, j]
-                held = 0.0 if w == NONE else bids[i, w, j]
-                members[i, j] = 0 if w == NONE else 1
+                w = ids[i, j, 0]
+                held = values[i, j, 0]
+                members[i, j] = count[i, j]
                 group_total[i, j] = held
                 lowest_bid[i, j] = held
                 better = b > held if strict else _outbids(b, i, held, w)
@@ -95,17 +84,17 @@ def bid_rows(rows: np.ndarray, bids: np.ndarray, winner: np.ndarray, single: np.
                 displaced[i, j] = w
                 displaced_bid[i, j] = held
                 continue
-            count = members[i, j]
-            group_total[i, j] = total[j]
-            lowest_bid[i, j] = lowest[j] if count > 0 else 0.0
-            room = count < need[j] and (not restricted[j] or _fills(have[j], i, required[j], agent_eq))
-            v = victim[j]
+            n_members = count[i, j]
+            members[i, j] = n_members
+            group_total[i, j] = total
+            lowest_bid[i, j] = lowest if n_members > 0 else 0.0
+            room = n_members < need[j] and (not restricted[j] or _fills(have[j], i, required[j], agent_eq))
             beats = False
-            if not room and v >= 0:
-                beats = b > bids[i, v, j] if strict else _outbids(b, i, bids[i, v, j], v)
+            if not room and victim >= 0:
+                beats = b > victim_bid if strict else _outbids(b, i, victim_bid, victim)
             outbid[i, j] = room or beats
-            displaced[i, j] = v if beats else NONE
-            displaced_bid[i, j] = bids[i, v, j] if beats else 0.0
+            displaced[i, j] = victim if beats else NONE
+            displaced_bid[i, j] = victim_bid if beats else 0.0
         for j in range(m):                                   # prerequisites ((3.6), article eq. (5))
             met = True
             if any_prereqs:

@@ -3,7 +3,8 @@
 ``exchange_all`` processes a round's deliveries one message at a time, exactly as ``consensus.exchange`` does with
 numpy — the CBBA decision table (``cbba_table.decide``) for single-agent tasks, the two-pass merge
 (``group_merge.merge``, ``groups.admit``) for multi-agent tasks, the receiver's timestamps and discovered agents, then
-the relayed timestamps of thesis (2.4) — but in compiled loops over the members of each column instead of whole
+the relayed timestamps of thesis (2.4) — but in compiled loops over the members of each column, read from the
+senders' snapshots and written to the receivers' tables in the ``GroupTable`` layout itself, instead of whole
 (receivers × agents × tasks) blocks. Only comparisons and copies happen here, so its results are bit-identical to
 the reference; ``tests/test_kernels.py`` checks that on random tables.
 """
@@ -59,43 +60,6 @@ def _replaceable(m: int, newcomer: int, required: np.ndarray, agent_eq: np.ndarr
         if required[e] > 0 and agent_eq[m, e] and agent_eq[newcomer, e]:
             return True
     return False
-
-
-@jit
-def _members(bids: np.ndarray, single: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every multi-agent column of every table in (H, N, M) ``bids`` as a member list: (H, M) counts and
-    (H, M, width) member ids in increasing order with their bids."""
-    h, n, m = bids.shape
-    count = np.zeros((h, m), dtype=np.int64)
-    ids = np.zeros((h, m, width), dtype=np.int64)
-    values = np.zeros((h, m, width))
-    for t in range(h):
-        for k in range(n):
-            for j in range(m):
-                if not single[j] and bids[t, k, j] > 0:
-                    c = count[t, j]
-                    ids[t, j, c] = k
-                    values[t, j, c] = bids[t, k, j]
-                    count[t, j] = c + 1
-    return count, ids, values
-
-
-@jit
-def _most_members(bids: np.ndarray, single: np.ndarray) -> int:
-    """The largest member count of any multi-agent column of (H, N, M) ``bids``."""
-    h, n, m = bids.shape
-    most = 0
-    count = np.zeros(m, dtype=np.int64)
-    for t in range(h):
-        count[:] = 0
-        for k in range(n):
-            for j in range(m):
-                if bids[t, k, j] > 0:
-                    count[j] += 1
-        for j in range(m):
-            if not single[j]:
-                most = max(most, count[j])
-    return most
 
 
 @jit
@@ -254,24 +218,33 @@ def _lookup(count: int, ids: np.ndarray, values: np.ndarray, keys: np.ndarray, o
 
 
 @jit
-def _own_tasks(snap_bids: np.ndarray, single: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _listed(agent: int, count: int, ids: np.ndarray) -> bool:
+    """``agent`` is in a member list."""
+    for c in range(count):  # noqa: SIM110 - compiled: an explicit loop, not a generator
+        if ids[c] == agent:
+            return True
+    return False
+
+
+@jit
+def _own_tasks(sent_count: np.ndarray, sent_ids: np.ndarray, single: np.ndarray, n: int
+               ) -> tuple[np.ndarray, np.ndarray]:
     """For each sent table (stacked (q, k) as t = q · N + k): the multi-agent tasks its sender k is a member of."""
-    h, n, _, m = snap_bids.shape
-    count = np.zeros(h * n, dtype=np.int64)
-    tasks = np.empty((h * n, m), dtype=np.int64)
-    for q in range(h):
-        for k in range(n):
-            t = q * n + k
-            for j in range(m):
-                if not single[j] and snap_bids[q, k, k, j] > 0:
-                    tasks[t, count[t]] = j
-                    count[t] += 1
+    h, m = sent_count.shape
+    count = np.zeros(h, dtype=np.int64)
+    tasks = np.empty((h, m), dtype=np.int64)
+    for t in range(h):
+        k = t % n
+        for j in range(m):
+            if not single[j] and _listed(k, sent_count[t, j], sent_ids[t, j]):
+                tasks[t, count[t]] = j
+                count[t] += 1
     return count, tasks
 
 
 @jit
-def _columns_to_visit(receiver_row: np.ndarray, single: np.ndarray, sender_tasks: np.ndarray, sender_count: int,
-                      i: int, k: int, s_i: np.ndarray, s_k: np.ndarray, visit: np.ndarray) -> int:
+def _columns_to_visit(count_i: np.ndarray, ids_i: np.ndarray, single: np.ndarray, sender_tasks: np.ndarray,
+                      sender_count: int, i: int, k: int, s_i: np.ndarray, s_k: np.ndarray, visit: np.ndarray) -> int:
     """The columns a message from k to i can change, into ``visit``; returns how many.
 
     A multi-agent column changes only through a member that i must trust from k (``_any_trusted``): k itself, or an
@@ -279,7 +252,7 @@ def _columns_to_visit(receiver_row: np.ndarray, single: np.ndarray, sender_tasks
     rounds, nearly always), only the columns where k is a member in i's table or in k's can change; every column
     otherwise. Single-agent columns are always visited (the CBBA table decides them). Order does not matter: a
     message's columns are merged independently."""
-    m = receiver_row.size
+    m = count_i.size
     only_sender = True
     for a in range(s_i.size):
         if a != i and a != k and s_k[a] > s_i[a]:
@@ -287,35 +260,38 @@ def _columns_to_visit(receiver_row: np.ndarray, single: np.ndarray, sender_tasks
             break
     visits = 0
     for j in range(m):
-        if not only_sender or single[j] or receiver_row[j] > 0:
+        if not only_sender or single[j] or _listed(k, count_i[j], ids_i[j]):
             visit[visits] = j
             visits += 1
     if only_sender:
         for c in range(sender_count):
             j = sender_tasks[c]
-            if receiver_row[j] <= 0:                    # not listed yet (k is no member in i's column)
+            if not _listed(k, count_i[j], ids_i[j]):    # not listed yet (k is no member in i's column)
                 visit[visits] = j
                 visits += 1
     return visits
 
 
 @jit
-def exchange_all(bids: np.ndarray, winner: np.ndarray, stamps: np.ndarray, known: np.ndarray,
-                 snap_bids: np.ndarray, snap_winner: np.ndarray, snap_winning: np.ndarray, snap_stamps: np.ndarray,
-                 snap_known: np.ndarray, receiver: np.ndarray, sender: np.ndarray, slot: np.ndarray, now: float,
-                 single: np.ndarray, need: np.ndarray, restricted: np.ndarray, required: np.ndarray,
-                 agent_eq: np.ndarray, canonical: bool) -> int:
+def exchange_all(count: np.ndarray, ids: np.ndarray, values: np.ndarray, own: np.ndarray, stamps: np.ndarray,
+                 known: np.ndarray, snap_count: np.ndarray, snap_ids: np.ndarray, snap_values: np.ndarray,
+                 snap_stamps: np.ndarray, snap_known: np.ndarray, receiver: np.ndarray, sender: np.ndarray,
+                 slot: np.ndarray, now: float, single: np.ndarray, need: np.ndarray, restricted: np.ndarray,
+                 required: np.ndarray, agent_eq: np.ndarray, canonical: bool) -> int:
     """Process deliveries (sorted by receiver, send round, sender) in place; returns the informative messages.
 
-    ``snap_*`` stack the snapshots the messages come from; ``slot[d]`` is delivery d's index into them.
+    The receivers' groups are the ``GroupTable`` arrays (``count`` (N, M), member ``ids`` and their bid ``values``
+    (N, M, W), ids increasing, empty slots EMPTY/0, and each holder's ``own`` bids (N, M)), written in place in the
+    same layout. ``snap_*`` stack the snapshots the messages come from ((Q, N, …)); ``slot[d]`` is delivery d's
+    index into them. A single-agent task's winner and bid are slot 0; a multi-agent column is a member list of at
+    most L_j, so a message costs O(M · L), not O(M · N).
     """
-    n, _, m = bids.shape
+    n, m, width = ids.shape
     relayed = np.full((n, n), -np.inf)
     informative = 0
-    # multi-agent columns as member lists (at most L_j members each): a message costs O(M · L), not O(M · N)
-    width = max(need.max(), _most_members(bids, single), _most_members(snap_bids.reshape(-1, n, m), single)) + 1
-    count, ids, values = _members(bids, single, width)
-    sent_count, sent_ids, sent_values = _members(snap_bids.reshape(-1, n, m), single, width)
+    sent_count = snap_count.reshape(-1, m)
+    sent_ids = snap_ids.reshape(-1, m, width)
+    sent_values = snap_values.reshape(-1, m, width)
     # equal columns share a content id, so an unchanged column costs one comparison per message
     sent_content, keys, owner = _intern_sent(sent_count, sent_ids, sent_values, single)
     content = np.full((n, m), -1, dtype=np.int64)
@@ -324,7 +300,7 @@ def exchange_all(bids: np.ndarray, winner: np.ndarray, stamps: np.ndarray, known
             if not single[j]:
                 content[i, j] = _lookup(count[i, j], ids[i, j], values[i, j], keys, owner, m, sent_count, sent_ids,
                                         sent_values)
-    own_count, own_tasks = _own_tasks(snap_bids, single)
+    own_count, own_tasks = _own_tasks(sent_count, sent_ids, single, n)
     before_ids = np.empty(width, dtype=np.int64)
     before_values = np.empty(width)
     taken = np.zeros(width, dtype=np.bool_)
@@ -336,14 +312,14 @@ def exchange_all(bids: np.ndarray, winner: np.ndarray, stamps: np.ndarray, known
         s_i[:] = stamps[i]
         s_k = snap_stamps[q, k]
         changed = False
-        visits = _columns_to_visit(bids[i, k], single, own_tasks[t], own_count[t], i, k, s_i, s_k, visit)
+        visits = _columns_to_visit(count[i], ids[i], single, own_tasks[t], own_count[t], i, k, s_i, s_k, visit)
         for x in range(visits):
             j = visit[x]
             if single[j]:
-                z_i = winner[i, j]
-                y_i = 0.0 if z_i == NONE else bids[i, z_i, j]
-                z_k = snap_winner[q, k, j]
-                y_k = snap_winning[q, k, j]
+                z_i = ids[i, j, 0]
+                y_i = values[i, j, 0]
+                z_k = sent_ids[t, j, 0]
+                y_k = sent_values[t, j, 0]
                 action = _decide(i, k, z_i, y_i, z_k, y_k, s_i, s_k, canonical)
                 if action == 0:
                     continue
@@ -351,11 +327,10 @@ def exchange_all(bids: np.ndarray, winner: np.ndarray, stamps: np.ndarray, known
                 new_y = y_k if action == 1 else 0.0
                 if new_z == z_i and new_y == y_i:
                     continue
-                if z_i != NONE:
-                    bids[i, z_i, j] = 0.0
-                if new_z != NONE:
-                    bids[i, new_z, j] = new_y
-                winner[i, j] = new_z
+                ids[i, j, 0] = new_z
+                values[i, j, 0] = 0.0 if new_z == NONE else new_y
+                count[i, j] = 0 if new_z == NONE else 1
+                own[i, j] = new_y if new_z == i else 0.0
                 changed = True
                 continue
             if content[i, j] >= 0 and content[i, j] == sent_content[t, j]:
@@ -368,14 +343,13 @@ def exchange_all(bids: np.ndarray, winner: np.ndarray, stamps: np.ndarray, known
             c_new = _merge_members(c_i, ids[i, j], values[i, j], c_k, sent_ids[t, j], sent_values[t, j], i, k,
                                    s_i, s_k, need[j], restricted[j], required[j], agent_eq, taken)
             count[i, j] = c_new
+            for c in range(c_new, width):                        # the empty slots, cleared (canonical layout)
+                ids[i, j, c], values[i, j, c] = NONE, 0.0
             same = c_new == c_i
             for c in range(c_i if same else 0):
                 same = same and ids[i, j, c] == before_ids[c] and values[i, j, c] == before_values[c]
             if not same:
-                for c in range(c_i):
-                    bids[i, before_ids[c], j] = 0.0
-                for c in range(c_new):
-                    bids[i, ids[i, j, c], j] = values[i, j, c]
+                own[i, j] = _value_of(i, c_new, ids[i, j], values[i, j])
                 content[i, j] = _lookup(c_new, ids[i, j], values[i, j], keys, owner, m, sent_count, sent_ids,
                                         sent_values)
                 changed = True
