@@ -73,8 +73,10 @@ class CBGAPolicy(Policy):
             return {}
         agents = list(observations)
         masks = np.stack([observations[a]["action_mask"] for a in agents]).astype(bool)
-        _, tasks = self.layout.split(np.stack([observations[a]["observation"] for a in agents]))
-        columns = (tasks[..., self.layout.task_column(name)] for name in self.columns)
+        obs = np.stack([observations[a]["observation"] for a in agents])
+        layout = self.layout
+        # task j's column c sits at own_size + j · task_size + c: every task's value of one column is a strided slice
+        columns = (obs[:, layout.own_size + layout.task_column(name)::layout.task_size] for name in self.columns)
         return dict(zip(agents, self.choose(masks, *columns).tolist()))
 
     @property
