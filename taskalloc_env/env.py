@@ -107,7 +107,10 @@ class TaskAllocEnv(ParallelEnv):
         self.invalid_action = invalid_action
         self.reward_scale = float(reward_scale)
         n, m = self.config.n_agents, self.config.n_tasks
-        check_memory(n, m, self.config.max_bundle, memory_limit_gb)      # before anything of that size exists
+        widest = (int(self.fixed_scenario.task_agents.max()) if self.fixed_scenario is not None
+                  else max_required_agents(self.config))
+        check_memory(n, m, self.config.max_bundle, memory_limit_gb, widest,     # before anything of that size exists
+                     self.config.asynchronous)
         self.possible_agents = [f"uav_{i}" for i in range(n)]
         self.agent_index = {a: i for i, a in enumerate(self.possible_agents)}
         self.agents: list[str] = []

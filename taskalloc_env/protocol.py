@@ -42,23 +42,28 @@ class ProtocolError(ValueError):
     """A decision the protocol does not allow (a bid that is not valid, a quit that is not allowed)."""
 
 
-def memory_estimate(n_agents: int, n_tasks: int, max_bundle: int | None = None) -> int:
-    """Bytes an episode of this size may hold at once (an upper estimate, float64 everywhere).
+def memory_estimate(n_agents: int, n_tasks: int, max_bundle: int | None = None, group_width: int | None = None,
+                    asynchronous: bool = False) -> int:
+    """Bytes an episode of this size may hold at once (an upper estimate, 8 bytes a value).
 
-    The local tables X_i[k][j] are N·M·W member slots (W = max_j L_j ≤ N, ``group_table``); without L_j at hand they
-    are bounded by N·N·M values, which the asynchronous protocol's per-entry times (``async_consensus.Times``) do
-    hold, and a round copies them about six times (the snapshot sent, the merge's receiver blocks, the before/after
-    tables of the convergence test). A batched gain computation holds ten (N, P + 1, M) arrays for paths of up to
-    P = max_bundle tasks; observations are N·22·M values, built three times.
+    The local tables X_i[k][j] are N·M·W member slots, ids and bids (W = max_j L_j ≤ N, ``group_table``;
+    ``group_width`` = W, N when not given); the asynchronous protocol also keeps a time per (holder, agent, task)
+    entry (``async_consensus.Times``), N·N·M values. A round copies the tables about seven times (the snapshot sent,
+    the merge's receiver blocks, the before/after tables of the convergence test). A batched gain computation holds
+    ten (N, P + 1, M) arrays for paths of up to P = max_bundle tasks; observations are N·22·M values, built three
+    times.
     """
-    return sum(_memory_terms(n_agents, n_tasks, max_bundle).values())
+    return sum(_memory_terms(n_agents, n_tasks, max_bundle, group_width, asynchronous).values())
 
 
-def _memory_terms(n_agents: int, n_tasks: int, max_bundle: int | None) -> dict[str, int]:
+def _memory_terms(n_agents: int, n_tasks: int, max_bundle: int | None, group_width: int | None = None,
+                  asynchronous: bool = False) -> dict[str, int]:
     """The terms of ``memory_estimate`` in bytes, keyed by what they hold."""
     n, m = int(n_agents), int(n_tasks)
     p = min(m, int(max_bundle or m))
-    return {"local tables of N·N·M values": 8 * 7 * n * n * m,
+    w = min(n, int(group_width or n))
+    tables = ({"per-entry times of N·N·M values (asynchronous)": 8 * 7 * n * n * m} if asynchronous else {})
+    return {"local tables of N·M·L member slots": 8 * 7 * 2 * n * m * w, **tables,
             "path gains of N·M·(P+1) values (P = max_bundle)": 8 * 10 * n * m * (p + 1),
             "observations of N·22·M values": 8 * 70 * n * m}
 
@@ -75,9 +80,10 @@ def available_memory() -> int:
     return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
-def check_memory(n_agents: int, n_tasks: int, max_bundle: int | None, limit_gb: float | None) -> None:
+def check_memory(n_agents: int, n_tasks: int, max_bundle: int | None, limit_gb: float | None,
+                 group_width: int | None = None, asynchronous: bool = False) -> None:
     """Refuse a size whose estimate exceeds ``limit_gb`` (default: the memory available now), before allocating."""
-    terms = _memory_terms(n_agents, n_tasks, max_bundle)
+    terms = _memory_terms(n_agents, n_tasks, max_bundle, group_width, asynchronous)
     need, largest = sum(terms.values()), max(terms, key=terms.__getitem__)
     limit = available_memory() if limit_gb is None else limit_gb * 2**30
     if need > limit:

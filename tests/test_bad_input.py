@@ -84,17 +84,26 @@ def test_bad_input_is_refused_naming_the_field(case):
 
 
 # -- resource estimates ------------------------------------------------------------------------------------------
-@pytest.mark.parametrize(("n", "m", "bundle", "term"), [
-    (10**9, 20, None, "local tables of N·N·M"),
-    (10, 10**9, None, "path gains of N·M·(P+1)"),
-    (10, 10**9, 3, "local tables of N·N·M"),
+@pytest.mark.parametrize(("n", "m", "bundle", "width", "asynchronous", "term"), [
+    (10**9, 20, None, None, False, "local tables of N·M·L"),
+    (10, 10**9, None, 4, False, "path gains of N·M·(P+1)"),
+    (10**6, 10**4, 3, 8, False, "local tables of N·M·L"),
+    (2000, 1000, 3, 4, True, "per-entry times of N·N·M"),
 ])
-def test_huge_sizes_are_refused_naming_the_dominant_term(n, m, bundle, term):
+def test_huge_sizes_are_refused_naming_the_dominant_term(n, m, bundle, width, asynchronous, term):
     with pytest.raises(ConfigError) as info:
-        check_memory(n, m, bundle, limit_gb=16.0)
+        check_memory(n, m, bundle, 16.0, width, asynchronous)
     text = str(info.value)
     assert f"{n} agents × {m} tasks" in text and f"mostly {term}" in text, text
     assert "memory_limit_gb" in text
+
+
+def test_the_sparse_tables_admit_what_dense_ones_could_not():
+    """2000 agents × 1000 tasks at L_j ≤ 4: the synchronous tables fit in 16 GiB (N·M·L slots), the asynchronous
+    protocol's per-entry times (N·N·M) do not."""
+    check_memory(2000, 1000, 3, 16.0, 4, asynchronous=False)
+    with pytest.raises(ConfigError):
+        check_memory(2000, 1000, 3, 16.0, 4, asynchronous=True)
 
 
 def test_a_billion_agents_are_refused_before_allocating():
