@@ -350,8 +350,7 @@ def training_table(runs_dir: Path, configs: Sequence[Config]) -> str:
             ppo = s.get("ppo", {})
             steps = s.get("steps", ppo.get("steps"))
             seconds = s.get("train_seconds", ppo.get("seconds"))
-            seed = path.parent.name.removeprefix("seed") + (" †" if s.get("reconstructed") else "")
-            body.append([config.label, seed, f"{steps:,}".replace(",", " "),
+            body.append([config.label, path.parent.name.removeprefix("seed"), f"{steps:,}".replace(",", " "),
                          f"{s['wall_seconds'] / 60:.1f}", f"{s['cpu_seconds'] / 60:.1f}" if "cpu_seconds" in s else
                          "–", f"{steps / seconds:.0f}", s.get("load_average_at_start", "–"),
                          ", ".join(s.get("init_from", [])) or "–"])

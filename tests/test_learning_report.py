@@ -9,7 +9,6 @@ import shutil
 
 import numpy as np
 import pytest
-import yaml
 
 from evaluation import learning_report as lr
 from policies import make_policy, rollout
@@ -86,16 +85,6 @@ def test_a_run_without_weights_keeps_its_archived_row(tmp_path, monkeypatch):
     assert rows[1]["score"] == [1.0, 2.0]
     assert (out / "runs" / config.name / "seed2" / "eval.csv").is_file()
     assert not (out / "runs" / config.name / "seed1").exists()
-
-
-def test_the_training_table_marks_reconstructed_summaries(tmp_path):
-    folder = tmp_path / lr.SB3.name
-    for seed, extra in ((0, {}), (1, {"reconstructed": "docs at abc"})):
-        (folder / f"seed{seed}").mkdir(parents=True)
-        (folder / f"seed{seed}" / "summary.yaml").write_text(yaml.safe_dump(
-            {"steps": 1000, "train_seconds": 10.0, "wall_seconds": 12.0, "cpu_seconds": 11.0, **extra}))
-    table = lr.training_table(tmp_path, [lr.SB3])
-    assert "| 0 |" in table and "| 1 † |" in table
 
 
 @pytest.mark.parametrize("name", ["train_small", "default", "size_20x40"])
