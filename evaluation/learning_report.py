@@ -11,7 +11,10 @@ Ray), and writes per-seed figures to ``results/learning/heldout_<setting>.json``
 CBGA, CBGABI, SGAMA, the exact optimum where it is tractable, behaviour cloning of CBGABI) and, per learned
 configuration, one row per training seed, read from ``<runs>/<config>/seed<k>`` (the training commands'
 ``--out-dir``; ``models/<name>`` for seeds that are committed models). It also copies each run's ``eval.csv`` and
-``summary.yaml`` to ``results/learning/runs/``, so that ``render`` needs nothing outside the repository.
+``summary.yaml`` to ``results/learning/runs/``, so that ``render`` needs nothing outside the repository. Rows
+already in the results file are kept while their weights are unchanged, and so is the row of a training seed whose
+model is no longer on disk. ``loss_small`` plays the ``train_small`` instances under 20 % message loss, with the same
+loss draws for every row; its centralised rows (SGAMA, the exact optimum) are copied from ``train_small``.
 
 ``render`` computes, per learned configuration, the mean over its seeds of each seed's mean score with a 95 %
 t-interval across seeds (Student t, k − 1 degrees of freedom), and per seed the paired comparison with CBGABI
@@ -88,6 +91,9 @@ class Setting:
     configs: tuple[Config, ...]
     baselines: tuple[str, ...] = ("random", "cbga", "cbgabi", "sgama", "exact")
     behaviour_cloning: bool = False
+    # a setting on the same instances with only network overrides: its centralised rows (SGAMA, the exact optimum)
+    # send no message, so they are copied from there instead of being solved again
+    centralised_from: str | None = None
 
 
 SETTINGS = {s.name: s for s in (
@@ -98,8 +104,12 @@ SETTINGS = {s.name: s for s in (
             {"n_agents": 8, "n_tasks": 16, "agents_per_task": 3}, (ATTENTION, MIXTURE)),
     Setting("size_20x40", "20 × 40, L_j = 4 (no model trained on it)", "default",
             {"n_agents": 20, "n_tasks": 40}, (ATTENTION, MIXTURE)),
+    # the same instances as train_small (the scenario is drawn before the network's generator is spawned) under
+    # 20 % loss; every row sees the same loss draws: the synchronous protocol sends every alive agent's message to
+    # every neighbour in every round, so the k-th draw of an episode is the same (round, sender, receiver)
+    # whatever the policy (tests/test_learning_report.py). SB3 and MAPPO models were trained on perfect links.
     Setting("loss_small", "training scenario under 20 % message loss", "train_small", {"message_loss": 0.2},
-            (LOSS,)),
+            (SB3, ATTENTION, LOSS), behaviour_cloning=True, centralised_from="train_small"),
     Setting("loss_default", "default scenario under 20 % message loss (a size mappo_loss never trained on)",
             "default", {"message_loss": 0.2}, (LOSS,)),
 )}
@@ -119,8 +129,13 @@ def shown(path: Path) -> str:
     return os.path.relpath(path) if path.resolve().is_relative_to(Path.cwd()) else str(path)
 
 
-def rows_to_run(setting: Setting, runs: Path) -> list[dict[str, Any]]:
-    """Every row of a setting: label, kind, solver name; learned rows carry their configuration and seed."""
+def rows_to_run(setting: Setting, runs: Path,
+                archived: Mapping[tuple[str, int], Mapping[str, Any]] | None = None) -> list[dict[str, Any]]:
+    """Every row of a setting: label, kind, solver name; learned rows carry their configuration and seed.
+
+    A training seed whose model is no longer on disk keeps its row from ``archived`` (the rows of the results
+    file, by label and seed), so that evaluating new seeds does not drop the figures of runs whose weights were
+    not kept."""
     cfg = resolve_config(setting.scenario, **setting.overrides)
     rows = [{"label": NAMES[b], "kind": "centralised" if b in ("sgama", "exact") else "baseline", "solver": b}
             for b in setting.baselines if not skip_reason(b, cfg)]
@@ -131,7 +146,13 @@ def rows_to_run(setting: Setting, runs: Path) -> list[dict[str, Any]]:
         for seed in SEEDS:
             folder = config.checkpoint(seed, runs)
             if not (folder / "model.json").is_file():
-                print(f"{setting.name}: {config.label}, seed {seed}: no model at {folder}, left out", flush=True)
+                old = (archived or {}).get((config.label, seed))
+                if old is not None:
+                    print(f"{setting.name}: {config.label}, seed {seed}: no model at {folder}, the archived row "
+                          f"(weights {old.get('weights')}) is kept", flush=True)
+                    rows.append(dict(old))
+                else:
+                    print(f"{setting.name}: {config.label}, seed {seed}: no model at {folder}, left out", flush=True)
                 continue
             where = shown(folder)
             rows.append({"label": config.label, "kind": "learned", "config": config.name, "seed": seed,
@@ -150,9 +171,18 @@ def evaluate(setting: Setting, episodes: int, jobs: int, backend: str, runs: Pat
     kept = {_key(r): r for r in old.get("rows", [])} if old.get("seeds") == seeds else {}
     cfg = resolve_config(setting.scenario, **setting.overrides)
     results = []
-    for row in rows_to_run(setting, runs):
+    archived = {(r["label"], r["seed"]): r for r in kept.values() if r["kind"] == "learned"}
+    source = out / f"heldout_{setting.centralised_from}.json" if setting.centralised_from else None
+    source_data = json.loads(source.read_text()) if source is not None and source.exists() else {}
+    centralised = {r["label"]: r for r in source_data.get("rows", []) if r["kind"] == "centralised"} \
+        if source_data.get("seeds") == seeds else {}
+    for row in rows_to_run(setting, runs, archived):
         if _key(row) in kept:
             results.append(kept[_key(row)])
+            continue
+        if row["kind"] == "centralised" and row["label"] in centralised:
+            results.append({**centralised[row["label"]], "copied_from": setting.centralised_from})
+            print(f"{setting.name}: {row['label']}: copied from {shown(source)} (it sends no message)", flush=True)
             continue
         played = run_episodes([Episode(row["solver"], cfg, s) for s in seeds], jobs=jobs, backend=backend,
                               desc=f"{setting.name}: {row['label']}" + (f" seed {row['seed']}" if "seed" in row
@@ -160,7 +190,8 @@ def evaluate(setting: Setting, episodes: int, jobs: int, backend: str, runs: Pat
         results.append({**row, **{f: [e[f] for e in played] for f in FIGURES}})
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"setting": setting.name, "seeds": seeds, "rows": results}, indent=0) + "\n")
-        if row["kind"] == "learned":
+    for row in results:     # kept rows too: their logs are archived even if an earlier evaluation did not do it
+        if row["kind"] == "learned" and (Path(row["folder"]) / "model.json").is_file():
             archive_logs(Path(row["folder"]), out / "runs" / row["config"] / f"seed{row['seed']}")
     path.write_text(json.dumps({"setting": setting.name, "seeds": seeds, "rows": results}, indent=0) + "\n")
     return path
@@ -235,7 +266,11 @@ def heldout_table(data: Mapping[str, Any]) -> str:
                                                           f"({format_p(paired(s, sgama).p_t)})" for s in scores),
                      *([] if opt is None else ["; ".join(_versus(s, opt)[0] for s in scores)]), *_protocol_mean(runs)])
     seeds = data["seeds"]
-    return (f"Held-out seeds {seeds[0]}–{seeds[-1]} ({len(seeds)} instances, the same for every row).\n\n"
+    copied = [r for r in rows if r.get("copied_from")]
+    note = "" if not copied else (" " + " and ".join(r["label"] for r in copied) + f": the rows of the "
+                                  f"`{copied[0]['copied_from']}` set (they send no message, so loss cannot "
+                                  "change them).")
+    return (f"Held-out seeds {seeds[0]}–{seeds[-1]} ({len(seeds)} instances, the same for every row).{note}\n\n"
             + markdown_table(head, body, align="lr" + "r" * (len(head) - 2)))
 
 

@@ -91,6 +91,7 @@ def test_training_runs_in_the_asynchronous_mode_with_popup_tasks(tmp_path):
                           "--n-envs", "4", "--n-steps", "64", "--batch-size", "128", "--n-epochs", "2",
                           "--eval-episodes", "4", "--progress-bar", "false", "--tensorboard", "false"])
     assert summary["ppo"]["steps"] >= 1024 and summary["validation"]["score"] > 0
+    assert summary["cpu_seconds"] > 0 and summary["load_average_at_start"] >= 0 and "load_average_at_end" in summary
     policy = LearnedPolicy.load(tmp_path / "model.json")
     assert policy.env_overrides["consensus"] == "acbba" and policy.env_overrides["popup_tasks"] == 2
     env = TaskAllocEnv("train_small", **policy.env_overrides)

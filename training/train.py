@@ -19,6 +19,7 @@ saving.
 from __future__ import annotations
 
 import dataclasses
+import os
 import sys
 import time
 from pathlib import Path
@@ -186,7 +187,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     (out_dir / "config.yaml").write_text(yaml.safe_dump(dataclasses.asdict(cfg), sort_keys=False))
     th.set_num_threads(cfg.torch_threads)
     set_random_seed(cfg.seed)
-    summary: dict[str, Any] = {"command": " ".join(["python -m training.train", *(argv or sys.argv[1:])])}
+    summary: dict[str, Any] = {"command": " ".join(["python -m training.train", *(argv or sys.argv[1:])]),
+                               "cpu_count": os.cpu_count(), "load_average_at_start": round(os.getloadavg()[0], 2)}
     t_start, cpu_start = time.perf_counter(), time.process_time()
 
     # -- environments: every learned agent of every copy is one slot ------------------------------------------------
@@ -244,6 +246,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     summary["validation"] = validation_score(model, cfg)
     summary["wall_seconds"] = round(time.perf_counter() - t_start, 1)
     summary["cpu_seconds"] = round(time.process_time() - cpu_start, 1)
+    summary["load_average_at_end"] = round(os.getloadavg()[0], 2)
     (out_dir / "summary.yaml").write_text(yaml.safe_dump(plain(summary), sort_keys=False))
     print(yaml.safe_dump(plain(summary), sort_keys=False), flush=True)
     return summary
