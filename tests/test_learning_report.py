@@ -94,6 +94,7 @@ def test_committed_results_render(name):
     assert table.count("\n") >= len({(r["label"], r["kind"] == "learned") for r in data["rows"]})
 
 
+@pytest.mark.slow
 def test_the_centralised_rows_do_not_depend_on_message_loss():
     """Why the loss set copies SGAMA and the exact optimum from the perfect-link set: they send no message."""
     from evaluation.episodes import Episode, run_episodes
