@@ -5,8 +5,8 @@
 
 Rows: random, CBGA, CBGABI (scripted, decentralised), SGAMA (centralised greedy), the exact optimum, and every
 ``--learned LABEL=PATH`` checkpoint (default: the committed models ``models/train_small_bc/bc.json``,
-``train_small``, ``train_small_bc``, ``mappo_small`` and ``mappo_mixture``). The tables of ``docs/learning.md``,
-with several training seeds per configuration, come from ``evaluation.learning_report``.
+``train_small``, ``train_small_bc``, ``mappo_small``, ``mappo_small_pooling`` and ``mappo_mixture``). The tables
+of ``docs/learning.md``, with several training seeds per configuration, come from ``evaluation.learning_report``.
 Each policy runs in an environment built with its ``env_overrides``; seed s is the same instance for
 every row (the instance is drawn at ``reset(seed=s)`` before any policy acts). Learned policies act greedily: the
 most likely kind of action (pass, bid or quit), then its most likely action (``policies.learned.greedy_actions``).
@@ -35,6 +35,7 @@ DEFAULT_LEARNED = (
     ("SB3 PPO from scratch", "train_small"),
     ("SB3 BC + PPO", "train_small_bc"),
     ("MAPPO attention", "mappo_small"),
+    ("MAPPO pooling", "mappo_small_pooling"),
     ("MAPPO attention, curriculum", "mappo_mixture"),
 )
 SCRIPTED = (("random", "random"), ("CBGA", "cbga"), ("CBGABI", "cbgabi"))
