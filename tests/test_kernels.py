@@ -123,19 +123,27 @@ def test_compiled_plan_equals_the_reference(case):
 
 
 @st.composite
-def score_tables(draw):
-    """Path tables with conflicts (more than L_j members), equal start times, equipment and prerequisites."""
-    n, m = draw(st.integers(1, 6)), draw(st.integers(1, 7))
+def typed_scenarios(draw, min_agents: int = 1) -> Scenario:
+    """Up to 6 agents carrying equipment A or B (or none of any), up to 7 tasks needing 1–3 agents, some with
+    equipment and prerequisites (ties in positions and windows are frequent)."""
+    n, m = draw(st.integers(min_agents, 6)), draw(st.integers(1, 7))
     typed = draw(st.booleans())
     agents = [Agent((float(k), 0.0, 0.0), 1.0, (draw(st.sampled_from("AB")),) if typed else ()) for k in range(n)]
     tasks = []
     for j in range(m):
         need = draw(st.integers(1, 3))
         equipment = tuple(draw(st.sampled_from("AB")) for _ in range(need)) if typed and draw(st.booleans()) else ()
-        prereqs = tuple(p for p in range(j) if draw(st.integers(0, 3)) == 0)
+        prereqs = tuple(p for p in range(j) if draw(st.integers(0, 4)) == 0)
         tasks.append(Task((1.0, 1.0, 0.0), 100.0, 0.0, 50.0, 1.0, agents=need, equipment=equipment,
                           prerequisites=prereqs))
-    scenario = Scenario.from_entities(agents, tasks, equipment_names=("A", "B") if typed else ())
+    return Scenario.from_entities(agents, tasks, equipment_names=("A", "B") if typed else ())
+
+
+@st.composite
+def score_tables(draw):
+    """Path tables with conflicts (more than L_j members), equal start times, equipment and prerequisites."""
+    scenario = draw(typed_scenarios())
+    n, m = scenario.n_agents, scenario.n_tasks
     table = PathTable.empty(n, m)
     table.members[:] = np.array([[draw(st.integers(0, 2)) > 0 for _ in range(m)] for _ in range(n)])
     table.start[table.members] = [draw(st.sampled_from([1.0, 2.0, 2.0, 3.5])) for _ in range(table.members.sum())]
@@ -161,18 +169,8 @@ def test_compiled_team_score_equals_the_reference(case):
 def views(draw):
     """A scenario with single- and multi-agent tasks (equipment, prerequisites), random tables in every agent's
     row (ties frequent), gains, quit blocks and bundles, and the view options."""
-    n, m = draw(st.integers(2, 6)), draw(st.integers(1, 7))
-    typed = draw(st.booleans())
-    types = [draw(st.sampled_from("AB")) for _ in range(n)] if typed else [None] * n
-    agents = [Agent((float(k), 0.0, 0.0), 1.0, () if t is None else (t,)) for k, t in enumerate(types)]
-    tasks = []
-    for j in range(m):
-        need = draw(st.integers(1, 3))
-        equipment = tuple(draw(st.sampled_from("AB")) for _ in range(need)) if typed and draw(st.booleans()) else ()
-        prereqs = tuple(p for p in range(j) if draw(st.integers(0, 4)) == 0)
-        tasks.append(Task((1.0, 1.0, 0.0), 100.0, 0.0, 50.0, 1.0, agents=need, equipment=equipment,
-                          prerequisites=prereqs))
-    scenario = Scenario.from_entities(agents, tasks, equipment_names=("A", "B") if typed else ())
+    scenario = draw(typed_scenarios(min_agents=2))
+    n, m = scenario.n_agents, scenario.n_tasks
     kn = LocalKnowledge.empty(n, m, scenario.task_agents, know_everyone=draw(st.booleans()))
     values = st.sampled_from([0.0, 0.0, 10.0, 20.0, 20.0, 35.0])
     for i in range(n):
