@@ -103,7 +103,7 @@ SETTINGS = {s.name: s for s in (
     Setting("size_8x16", "8 × 16, L_j = 3 (no model trained on it)", "default",
             {"n_agents": 8, "n_tasks": 16, "agents_per_task": 3}, (ATTENTION, MIXTURE)),
     Setting("size_20x40", "20 × 40, L_j = 4 (no model trained on it)", "default",
-            {"n_agents": 20, "n_tasks": 40}, (ATTENTION, MIXTURE)),
+            {"n_agents": 20, "n_tasks": 40}, (POOLING, ATTENTION, MIXTURE)),
     # the same instances as train_small (the scenario is drawn before the network's generator is spawned) under
     # 20 % loss; every row sees the same loss draws: the synchronous protocol sends every alive agent's message to
     # every neighbour in every round, so the k-th draw of an episode is the same (round, sender, receiver)
