@@ -182,26 +182,32 @@ def refresh_rows(previous: BidView | None, rows: Sequence[int], knowledge: Local
     (``kernels.bids.bid_rows``) when numba is there, else ``bid_view`` in full.
 
     The rows are rewritten in ``previous``'s arrays (a view describes the tables until they next change; copying
-    (N, M) arrays at every bid cost more than the bids at 100 agents); the view returned is a new object over them.
+    (N, M) arrays at every bid cost more than the bids at 100 agents), and ``previous`` itself is returned with its
+    cached ``can_bid`` dropped.
     """
     if not kernels.COMPILED:
         return bid_view(knowledge, scenario, equipment, equipment_match, gain, slot, prereq_mode=prereq_mode,
                         require_known_capacity=require_known_capacity, max_bundle=max_bundle, fillable=fillable,
                         bid_warping=bid_warping, outbid_ties=outbid_ties)
     n, m = gain.shape
-    if previous is None:
-        rows = range(n)
-        arrays = {name: np.zeros((n, m), dtype=np.int64 if name in ("members", "displaced") else
-                                 bool if name in ("outbid", "eligible", "prereqs_met", "in_bundle") else float)
-                  for name in ROW_FIELDS}
+    reuse = (previous is not None and previous.gain is gain and previous.slot is slot
+             and previous.equipment_match is equipment_match)
+    if reuse:
+        arrays = [getattr(previous, name) for name in ROW_FIELDS]
     else:
-        arrays = {name: getattr(previous, name) for name in ROW_FIELDS}
+        rows = range(n)
+        arrays = [np.zeros((n, m), dtype=np.int64 if name in ("members", "displaced") else
+                           bool if name in ("outbid", "eligible", "prereqs_met", "in_bundle") else float)
+                  for name in ROW_FIELDS]
     capacity = (known_capacity(knowledge, scenario, equipment, equipment_match) if require_known_capacity
                 else _everyone_known(n, m))
     groups = knowledge.groups
     bid_rows(np.asarray(rows, dtype=np.int64), groups.count, groups.members, groups.bids, knowledge.single, gain,
-             knowledge.quit_blocked, np.array([len(b) for b in knowledge.bundles], dtype=np.int64), equipment_match,
-             fillable, capacity, scenario.task_agents.astype(np.int64), equipment.restricted, equipment.required,
-             equipment.agent, scenario.task_prereqs, PREREQ_MODES[prereq_mode], int(max_bundle), bid_warping,
-             outbid_ties == "strict", *arrays.values())
-    return BidView(gain=gain, slot=slot, equipment_match=equipment_match, **arrays)
+             knowledge.quit_blocked, np.fromiter(map(len, knowledge.bundles), dtype=np.int64, count=n),
+             equipment_match, fillable, capacity, scenario.task_agents.astype(np.int64), equipment.restricted,
+             equipment.required, equipment.agent, scenario.task_prereqs, PREREQ_MODES[prereq_mode], int(max_bundle),
+             bid_warping, outbid_ties == "strict", *arrays)
+    if reuse:                       # the same arrays, rewritten: only the derived valid-bid mask is stale
+        previous.__dict__.pop("can_bid", None)
+        return previous
+    return BidView(gain=gain, slot=slot, equipment_match=equipment_match, **dict(zip(ROW_FIELDS, arrays)))

@@ -74,9 +74,9 @@ def exchange(knowledge: LocalKnowledge, deliveries: Deliveries, snapshots: dict[
         np.fill_diagonal(knowledge.timestamps, now)
         return Traffic(messages=0, informative=0, data_items=0)
     kn = knowledge
-    sent = sorted({int(r) for r in deliveries.sent})
-    slot = np.searchsorted(np.array(sent, dtype=np.int64), deliveries.sent)
-    stack = [snapshots[r] for r in sent]
+    sent = np.unique(deliveries.sent)                   # the send rounds, ascending
+    slot = np.searchsorted(sent, deliveries.sent)
+    stack = [snapshots[r] for r in sent.tolist()]
 
     def stacked(arrays: list[np.ndarray]) -> np.ndarray:
         return arrays[0][None] if len(arrays) == 1 else np.stack(arrays)

@@ -334,7 +334,8 @@ class TaskAllocEnv(ParallelEnv):
     def _observations(self) -> dict[str, dict[str, np.ndarray]]:
         obs = self._builder.build(self.protocol, self._passed, self.dtype)
         self._masks = self._builder.action_masks(self.protocol, self._passed)
-        return {a: {"observation": obs[self.agent_index[a]], "action_mask": self._masks[self.agent_index[a]].copy()}
+        handed = self._masks.copy()             # the caller's masks: editing one leaves the env's checks alone
+        return {a: {"observation": obs[self.agent_index[a]], "action_mask": handed[self.agent_index[a]]}
                 for a in self.agents}
 
     def _infos(self, flags: dict[str, str]) -> dict[str, dict[str, Any]]:

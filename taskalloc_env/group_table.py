@@ -97,14 +97,10 @@ class GroupTable:
 
     def joined(self, before: GroupTable) -> np.ndarray:
         """(N, M) a member of j's group in i's table that ``before`` did not list."""
-        out = np.zeros(self.count.shape, dtype=bool)
-        for s in range(self.members.shape[2]):
-            member = self.members[:, :, s]
-            was = np.zeros(out.shape, dtype=bool)
-            for b in range(before.members.shape[2]):
-                was |= before.members[:, :, b] == member
-            out |= (member >= 0) & ~was
-        return out
+        was = np.zeros(self.members.shape, dtype=bool)                                       # (N, M, W)
+        for b in range(before.members.shape[2]):
+            was |= self.members == before.members[:, :, b, None]
+        return ((self.members >= 0) & ~was).any(axis=2)
 
     def changed(self, before: GroupTable) -> np.ndarray:
         """(N, M) column j of i's table differs from ``before``'s (a member or a bid)."""
@@ -130,8 +126,9 @@ class GroupTable:
         """X_i[k][j] = value: k joins (or re-bids in) j's group if value > 0, leaves it otherwise."""
         members, bids = self.members[i, j], self.bids[i, j]
         n = int(self.count[i, j])
-        at = bisect.bisect_left(members.tolist(), k, 0, n)
-        present = at < n and members[at] == k
+        ids = members.tolist()
+        at = bisect.bisect_left(ids, k, 0, n)
+        present = at < n and ids[at] == k
         if value > 0:
             if not present:
                 if n >= self.capacity[j]:

@@ -77,6 +77,10 @@ class CommGraph:
         return len(self.adjacency)
 
 
+_NOTHING = np.zeros(0, dtype=np.int64)
+_NOTHING.setflags(write=False)
+
+
 # -- delivery -------------------------------------------------------------------------------------------------------
 @dataclasses.dataclass(frozen=True)
 class Deliveries:
@@ -167,7 +171,8 @@ class Network:
         self.loss = loss or NoLoss()
         self.max_delay = max_delay
         self.rng = rng if rng is not None else np.random.default_rng(0)
-        self._queue = (np.zeros(0, dtype=np.int64),) * 4      # receiver, sender, sent, due
+        self._queue = (_NOTHING,) * 4                         # receiver, sender, sent, due
+        self._link_cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
     @property
     def perfect(self) -> bool:
@@ -175,23 +180,43 @@ class Network:
 
     def send(self, now: int, senders: np.ndarray, items: np.ndarray) -> Sent:
         """Every agent of ``senders`` broadcasts to its neighbours; ``items`` (N,) the data items of each message."""
-        sending = np.zeros(self.graph.n_agents, dtype=bool)
-        sending[senders] = True
-        sender, receiver = np.nonzero(self.graph.adjacency & sending[:, None])      # sender-major, ascending
-        lost = self.loss.lost(sender, receiver, self.rng)
-        delay = self.rng.integers(0, self.max_delay + 1, len(sender)) if self.max_delay else np.zeros(len(sender), int)
-        keep = ~lost
-        queued = (receiver[keep], sender[keep], np.full(int(keep.sum()), now), now + delay[keep])
-        self._queue = tuple(np.concatenate([old, new]) for old, new in zip(self._queue, queued))
-        return Sent(sent=len(sender), lost=int(lost.sum()), delayed=int((delay[keep] > 0).sum()),
-                    data_items=int(items[sender].sum()))
+        sender, receiver = self._links(senders)
+        if self.perfect:                    # nothing is lost or delayed, and nothing is drawn
+            stamp = np.full(len(sender), now)
+            queued, lost, delayed = (receiver, sender, stamp, stamp), 0, 0
+        else:
+            dropped = self.loss.lost(sender, receiver, self.rng)
+            delay = (self.rng.integers(0, self.max_delay + 1, len(sender)) if self.max_delay
+                     else np.zeros(len(sender), int))
+            keep = ~dropped
+            queued = (receiver[keep], sender[keep], np.full(int(keep.sum()), now), now + delay[keep])
+            lost, delayed = int(dropped.sum()), int((delay[keep] > 0).sum())
+        self._queue = (queued if not len(self._queue[0])
+                       else tuple(np.concatenate([old, new]) for old, new in zip(self._queue, queued)))
+        return Sent(sent=len(sender), lost=lost, delayed=delayed, data_items=int(items[sender].sum()))
+
+    def _links(self, senders: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(sender, receiver) of every link out of ``senders``, sender-major, ascending (the same senders round
+        after round: cached by the set)."""
+        key = np.asarray(senders, dtype=np.int64).tobytes()
+        if key not in self._link_cache:
+            sending = np.zeros(self.graph.n_agents, dtype=bool)
+            sending[senders] = True
+            self._link_cache[key] = np.nonzero(self.graph.adjacency & sending[:, None])
+        return self._link_cache[key]
 
     def deliver(self, now: int, alive: np.ndarray) -> Deliveries:
         """The messages due by ``now`` whose receiver is alive (a failed receiver's messages are dropped)."""
         receiver, sender, sent, due = self._queue
         ready = due <= now
-        self._queue = tuple(a[~ready] for a in self._queue)
-        take = ready & alive[receiver]
+        if ready.all():                     # everything is due (always on perfect links)
+            self._queue = (_NOTHING,) * 4
+            take = alive[receiver]
+        else:
+            self._queue = tuple(a[~ready] for a in self._queue)
+            take = ready & alive[receiver]
+        if take.all():
+            return Deliveries.of(receiver, sender, sent)
         return Deliveries.of(receiver[take], sender[take], sent[take])
 
     def in_flight(self) -> np.ndarray:

@@ -404,10 +404,11 @@ class Protocol:
     def _release_outbid(self) -> None:
         """Release the first lost bundle task and everything after it (thesis §2.2.4; Johnson (3.11)–(3.12))."""
         kn = self.knowledge
-        own = kn.own_bids()
+        own = kn.groups.own.tolist()            # Python floats: one row lookup per bundle task
         for i, bundle in enumerate(kn.bundles):
             sequence = bundle if self.cfg.release_order == "bundle" else kn.paths[i]
-            lost = next((j for j in sequence if own[i, j] <= 0), None)
+            row = own[i]
+            lost = next((j for j in sequence if row[j] <= 0), None)
             if lost is not None:
                 kn.release(i, lost, self.cfg.release_order)
                 self._dirty.add(i)

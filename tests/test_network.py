@@ -33,6 +33,24 @@ def test_perfect_links_deliver_every_neighbour_message_at_once_in_sender_order()
     assert [p.tolist() for p in got.positions()] == [[0, 1, 3, 5, 7], [2, 4, 6]]
 
 
+def test_perfect_links_deliver_what_the_general_path_delivers():
+    """Perfect links skip the loss and delay draws; a lossy network that loses nothing (p = 0) takes the general
+    path. Round after round, with senders dropping out and a receiver dead, both deliver the same messages."""
+    g = graph(6, comm_range=2.0)
+    perfect, general = Network(g), Network(g, IndependentLoss(0.0), rng=RNG(4))
+    assert perfect.perfect and not general.perfect
+    alive = np.ones(6, dtype=bool)
+    for now, senders in enumerate([np.arange(6), np.arange(6), np.array([0, 2, 5]), np.arange(1, 6)], start=1):
+        alive[4] = now < 3
+        items = np.arange(6) + now
+        a, b = perfect.send(now, senders, items), general.send(now, senders, items)
+        assert a == b
+        got, want = perfect.deliver(now, alive), general.deliver(now, alive)
+        for field in ("receiver", "sender", "sent"):
+            assert np.array_equal(getattr(got, field), getattr(want, field))
+        assert len(got) and len(perfect.in_flight()) == len(general.in_flight()) == 0
+
+
 def test_independent_loss_drops_the_requested_share():
     g = graph(20)
     net = Network(g, IndependentLoss(0.2), rng=RNG(1))

@@ -320,6 +320,8 @@ def exchange_all(count: np.ndarray, ids: np.ndarray, values: np.ndarray, own: np
                 y_i = values[i, j, 0]
                 z_k = sent_ids[t, j, 0]
                 y_k = sent_values[t, j, 0]
+                if z_k == z_i and y_k == y_i:
+                    continue                # the same entry: an update rewrites it, a reset needs z_k ≠ z_i
                 action = _decide(i, k, z_i, y_i, z_k, y_k, s_i, s_k, canonical)
                 if action == 0:
                     continue

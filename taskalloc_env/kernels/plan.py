@@ -27,6 +27,14 @@ def _lateness(arrival: float, start: float, task_start: float, arrival_time: boo
 
 
 @jit
+def _on_path(path: np.ndarray, length: int, j: int) -> bool:
+    for r in range(length):  # noqa: SIM110 - compiled: an explicit loop, not a generator
+        if path[r] == j:
+            return True
+    return False
+
+
+@jit
 def plan_paths(padded: np.ndarray, lengths: np.ndarray, speed: np.ndarray, from_start: np.ndarray,
                dist: np.ndarray, earliest: np.ndarray, deadline: np.ndarray, doable: np.ndarray,
                duration: np.ndarray, task_start: np.ndarray, pay: np.ndarray, lam: float, gamma: float,
@@ -59,13 +67,14 @@ def plan_paths(padded: np.ndarray, lengths: np.ndarray, speed: np.ndarray, from_
         feasible[a] = ok_path
         if not gains:
             continue
+        for r in range(length):                                  # a task on the path has no gain
+            gain[rows[a], padded[a, r]] = 0.0
+            slot[rows[a], padded[a, r]] = -1
         for j in range(m):                                       # (3.11): the best feasible insertion of j
+            if slot[rows[a], j] == -1 and gain[rows[a], j] == 0.0 and _on_path(padded[a], length, j):
+                continue
             best = -np.inf
             best_slot = 0
-            on_path = False
-            for r in range(length):
-                if padded[a, r] == j:
-                    on_path = True
             for n in range(length + 1):
                 free = 0.0 if n == 0 else finish[a, n - 1]
                 to_task = from_start[a, j] if n == 0 else dist[padded[a, n - 1], j]
@@ -120,7 +129,7 @@ def plan_paths(padded: np.ndarray, lengths: np.ndarray, speed: np.ndarray, from_
                 if value > best:
                     best = value
                     best_slot = n
-            if on_path or not best > 0:
+            if not best > 0:
                 gain[rows[a], j] = 0.0
                 slot[rows[a], j] = -1
             else:
