@@ -78,6 +78,8 @@ POOLING = Config("MAPPO, pooling actor, state critic", "mappo_small_pooling", {0
 ATTENTION = Config("MAPPO, attention actor, state critic", "mappo_small", {0: "mappo_small"})
 MIXTURE = Config("MAPPO attention, curriculum 4×8 → 10×20", "mappo_mixture")
 LOSS = Config("MAPPO attention, trained under 20 % loss", "mappo_loss")
+LOSS_POOLING = Config("MAPPO pooling, trained under 20 % loss", "mappo_loss_pooling")
+MIXTURE_POOLING = Config("MAPPO pooling, curriculum 4×8 → 10×20", "mappo_mixture_pooling")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,8 +100,9 @@ class Setting:
 
 SETTINGS = {s.name: s for s in (
     Setting("train_small", "training scenario, 4 × 8, L_j ∈ {1, 2}", "train_small", {},
-            (SB3, POOLING, ATTENTION, MIXTURE), behaviour_cloning=True),
-    Setting("default", "default scenario, 10 × 20, L_j = 4", "default", {}, (SB3, POOLING, ATTENTION, MIXTURE)),
+            (SB3, POOLING, ATTENTION, MIXTURE, MIXTURE_POOLING), behaviour_cloning=True),
+    Setting("default", "default scenario, 10 × 20, L_j = 4", "default", {},
+            (SB3, POOLING, ATTENTION, MIXTURE, MIXTURE_POOLING)),
     Setting("size_8x16", "8 × 16, L_j = 3 (no model trained on it)", "default",
             {"n_agents": 8, "n_tasks": 16, "agents_per_task": 3}, (ATTENTION, MIXTURE)),
     Setting("size_20x40", "20 × 40, L_j = 4 (no model trained on it)", "default",
@@ -109,9 +112,9 @@ SETTINGS = {s.name: s for s in (
     # every neighbour in every round, so the k-th draw of an episode is the same (round, sender, receiver)
     # whatever the policy (tests/test_learning_report.py). SB3 and MAPPO models were trained on perfect links.
     Setting("loss_small", "training scenario under 20 % message loss", "train_small", {"message_loss": 0.2},
-            (SB3, POOLING, ATTENTION, LOSS), behaviour_cloning=True, centralised_from="train_small"),
+            (SB3, POOLING, ATTENTION, LOSS, LOSS_POOLING), behaviour_cloning=True, centralised_from="train_small"),
     Setting("loss_default", "default scenario under 20 % message loss (a size mappo_loss never trained on)",
-            "default", {"message_loss": 0.2}, (LOSS,)),
+            "default", {"message_loss": 0.2}, (LOSS, LOSS_POOLING)),
 )}
 NAMES = {"random": "random", "cbga": "CBGA", "cbgabi": "CBGABI", "sgama": "SGAMA (centralised greedy)",
          "exact": "exact optimum", "bc": "behaviour cloning of CBGABI (SB3, 1 seed)"}
@@ -371,7 +374,7 @@ def render(out: Path, doc: Path, curves: Path) -> None:
         path = out / f"heldout_{name}.json"
         if path.exists():
             text = replace_block(text, name, heldout_table(json.loads(path.read_text())))
-    configs = (SB3, POOLING, ATTENTION, MIXTURE, LOSS)
+    configs = (SB3, POOLING, ATTENTION, MIXTURE, LOSS, MIXTURE_POOLING, LOSS_POOLING)
     text = replace_block(text, "training", training_table(out / "runs", configs))
     plot_curves(curves, out / "runs", configs)
     doc.write_text(text)
