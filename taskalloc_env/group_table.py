@@ -151,6 +151,14 @@ class GroupTable:
         if k == i:
             self.own[i, j] = value if value > 0 else 0.0
 
+    def set_winner(self, i: int, j: int, winner: int, bid: float) -> None:
+        """Overwrite holder i's single-agent column j with one member ``winner`` (not EMPTY) bidding ``bid`` > 0
+        (``set_winners`` for one column)."""
+        self.members[i, j, 0] = winner
+        self.bids[i, j, 0] = bid
+        self.count[i, j] = 1
+        self.own[i, j] = bid if winner == i else 0.0
+
     def set_winners(self, holders: np.ndarray, tasks: np.ndarray, winner: np.ndarray, bid: np.ndarray) -> None:
         """Overwrite single-agent columns (holder, task) with (winner, bid) pairs in slot 0 (EMPTY clears)."""
         has = winner != EMPTY

@@ -83,11 +83,18 @@ class LocalKnowledge:
         """Overwrite whole single-agent columns (holder, task) with (winner, bid) pairs (NONE clears)."""
         self.groups.set_winners(holders, tasks, new_winner, new_bid)
 
-    def add_to_bundle(self, i: int, j: int, slot: int, bid: float, now: int) -> None:
-        """b_i ⊕_end j, p_i ⊕_slot j, X_i[i][j] = c_ij, H_i[j] = T (Alg 5 lines 23–26, (5.6))."""
+    def add_to_bundle(self, i: int, j: int, slot: int, bid: float, now: int, displaced: int = NONE) -> None:
+        """b_i ⊕_end j, p_i ⊕_slot j, X_i[i][j] = c_ij, H_i[j] = T (Alg 5 lines 23–26, (5.6)); the member
+        ``displaced`` (NONE: none) leaves j's group in i's table first (our choice: n_j ≤ L_j locally, Phase 2
+        propagates the eviction)."""
         self.bundles[i].append(j)
         self.paths[i].insert(slot, j)
-        self.set_bid(i, i, j, bid)
+        if self.single[j]:              # L_j = 1: i takes slot 0 from the winner it displaces, in one write
+            self.groups.set_winner(i, j, i, bid)
+        else:
+            if displaced != NONE:
+                self.set_bid(i, displaced, j, 0.0)
+            self.set_bid(i, i, j, bid)
         self.assigned_at[i, j] = now
 
     def release(self, i: int, lost: int, order: str) -> list[int]:

@@ -26,7 +26,6 @@ import numpy as np
 
 from taskalloc_env.allocation import Allocation, Counters
 from taskalloc_env.bidding import BidView, refresh_rows
-from taskalloc_env.cbba_table import NONE
 from taskalloc_env.config import TaskAllocConfig, episode_bound
 from taskalloc_env.consensus import Snapshot, Traffic, exchange, snapshot
 from taskalloc_env.errors import ConfigError
@@ -230,12 +229,9 @@ class Protocol:
         view = view if view is not None else self.view()
         if not view.can_bid[agent, task]:
             raise ProtocolError(f"agent {agent} has no valid bid on task {task} ({self.explain_bid(agent, task)})")
-        kn = self.knowledge
-        displaced = int(view.displaced[agent, task])
-        if displaced != NONE:           # keep n_j ≤ L_j locally (our choice); Phase 2 propagates the eviction
-            kn.set_bid(agent, displaced, task, 0.0)
         value = float(view.bid[agent, task])
-        kn.add_to_bundle(agent, task, int(view.slot[agent, task]), value, self.round)
+        self.knowledge.add_to_bundle(agent, task, int(view.slot[agent, task]), value, self.round,
+                                     displaced=int(view.displaced[agent, task]))
         self.counters.bids += 1
         self._pending_quits.pop((agent, task), None)        # re-bid before anyone saw the quit: it stays unseen
         self._touch(agent)

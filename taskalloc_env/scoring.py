@@ -26,6 +26,7 @@ score DMG, Johnson (3.13)–(3.19)).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from collections.abc import Sequence
 from typing import Any
 
@@ -147,17 +148,14 @@ class ScoringModel:
                        gain: np.ndarray, slot: np.ndarray) -> Timing:
         """``kernels.plan.plan_paths`` on padded paths: the timing, with c_ij and n_ij written to ``rows``."""
         s = self.scenario
-        agents = np.asarray(agents, dtype=np.int64)
-        padded, lengths = _padded(paths)
-        count, width = padded.shape
-        arrival, start, finish, reward, cost = np.zeros((5, count, width))      # one allocation for the five
-        feasible = np.ones(count, dtype=bool)
-        plan_paths(padded, lengths, self.speed[agents], self.dist_agent_task[agents], self.dist_task_task,
-                   self.earliest, self.deadline, self.doable, s.task_duration, s.task_start, self.pay, self.lam,
-                   self.gamma, self.distance_cost == "leg", self.reward_time == "arrival",
-                   self.marginal_gain == "frozen", gains, arrival, start, finish, reward, cost, feasible, rows, gain,
-                   slot)
-        return Timing(padded, lengths, arrival, start, finish, reward, cost, feasible)
+        lengths = np.fromiter(map(len, paths), dtype=np.int64, count=len(paths))
+        flat = np.fromiter(itertools.chain.from_iterable(paths), dtype=np.int64, count=int(lengths.sum()))
+        padded, *timing = plan_paths(
+            flat, lengths, np.asarray(agents, dtype=np.int64), self.speed, self.dist_agent_task, self.dist_task_task,
+            self.earliest, self.deadline, self.doable, s.task_duration, s.task_start, self.pay, self.lam, self.gamma,
+            self.distance_cost == "leg", self.reward_time == "arrival", self.marginal_gain == "frozen", gains, rows,
+            gain, slot)
+        return Timing(padded, lengths, *timing)
 
     def plan_reference(self, agents: Sequence[int], paths: Sequence[Sequence[int]], gains: bool = True) -> Plan:
         """``plan`` in numpy, vectorised over (agent, slot, task) blocks (the reference).

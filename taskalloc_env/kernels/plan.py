@@ -35,32 +35,46 @@ def _on_path(path: np.ndarray, length: int, j: int) -> bool:
 
 
 @jit
-def plan_paths(padded: np.ndarray, lengths: np.ndarray, speed: np.ndarray, from_start: np.ndarray,
+def plan_paths(flat: np.ndarray, lengths: np.ndarray, agents: np.ndarray, speed: np.ndarray, from_start: np.ndarray,
                dist: np.ndarray, earliest: np.ndarray, deadline: np.ndarray, doable: np.ndarray,
                duration: np.ndarray, task_start: np.ndarray, pay: np.ndarray, lam: float, gamma: float,
-               leg_cost: bool, arrival_time: bool, frozen: bool, gains: bool,
-               arrival: np.ndarray, start: np.ndarray, finish: np.ndarray, reward: np.ndarray, cost: np.ndarray,
-               feasible: np.ndarray, rows: np.ndarray, gain: np.ndarray, slot: np.ndarray) -> None:
-    """Fill the (A, P) timing arrays, ``feasible`` (A,) and, with ``gains``, c_ij and n_ij of path a into row
-    ``rows[a]`` of ``gain`` and ``slot``, in place.
+               leg_cost: bool, arrival_time: bool, frozen: bool, gains: bool, rows: np.ndarray, gain: np.ndarray,
+               slot: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                          np.ndarray]:
+    """The paths of ``agents`` (concatenated in ``flat``, ``lengths`` each) timed: the zero-padded (A, P) paths,
+    arrival, start, finish, reward and cost arrays and ``feasible`` (A,); with ``gains``, c_ij and n_ij of path a
+    written into row ``rows[a]`` of ``gain`` and ``slot``, in place.
 
-    ``from_start`` (A, M) is each agent's distance to every task; ``dist`` (M, M) between tasks. Padding entries of
-    the timing arrays stay zero.
+    ``speed`` (N,) and ``from_start`` (N, M), every agent's distance to every task, are indexed by ``agents``;
+    ``dist`` (M, M) between tasks. Padding entries of the timing arrays stay zero.
     """
-    count, m = from_start.shape
-    leg = np.zeros(padded.shape[1])
+    count, m = lengths.size, from_start.shape[1]
+    width = 0
     for a in range(count):
+        width = max(width, lengths[a])
+    padded = np.zeros((count, width), dtype=np.int64)
+    at = 0
+    for a in range(count):
+        for r in range(lengths[a]):
+            padded[a, r] = flat[at]
+            at += 1
+    arrival, start, finish = np.zeros((count, width)), np.zeros((count, width)), np.zeros((count, width))
+    reward, cost = np.zeros((count, width)), np.zeros((count, width))
+    feasible = np.ones(count, dtype=np.bool_)
+    leg = np.zeros(width)
+    for a in range(count):
+        agent = agents[a]
         t = 0.0
         ok_path = True
         length = lengths[a]
         for r in range(length):                                  # (3.7)–(3.10) along the path
             j = padded[a, r]
-            leg[r] = from_start[a, j] if r == 0 else dist[padded[a, r - 1], j]
-            arrival[a, r] = t + leg[r] / speed[a]
+            leg[r] = from_start[agent, j] if r == 0 else dist[padded[a, r - 1], j]
+            arrival[a, r] = t + leg[r] / speed[agent]
             start[a, r] = max(arrival[a, r], earliest[j])
             finish[a, r] = start[a, r] + duration[j]
             reward[a, r] = pay[j] * np.exp(-lam * _lateness(arrival[a, r], start[a, r], task_start[j], arrival_time))
-            cost[a, r] = gamma * (leg[r] if leg_cost else from_start[a, j])
+            cost[a, r] = gamma * (leg[r] if leg_cost else from_start[agent, j])
             if not (arrival[a, r] < deadline[j] and doable[j]):
                 ok_path = False
             t = finish[a, r]
@@ -73,12 +87,18 @@ def plan_paths(padded: np.ndarray, lengths: np.ndarray, speed: np.ndarray, from_
         for j in range(m):                                       # (3.11): the best feasible insertion of j
             if slot[rows[a], j] == -1 and gain[rows[a], j] == 0.0 and _on_path(padded[a], length, j):
                 continue
+            if not doable[j]:                                    # no slot is feasible
+                gain[rows[a], j] = 0.0
+                slot[rows[a], j] = -1
+                continue
             best = -np.inf
             best_slot = 0
             for n in range(length + 1):
                 free = 0.0 if n == 0 else finish[a, n - 1]
-                to_task = from_start[a, j] if n == 0 else dist[padded[a, n - 1], j]
-                arrive = free + to_task / speed[a]
+                if not free < deadline[j]:                      # finish times only grow along the path: no later
+                    break                                        # slot can arrive before the deadline either
+                to_task = from_start[agent, j] if n == 0 else dist[padded[a, n - 1], j]
+                arrive = free + to_task / speed[agent]
                 begin = max(arrive, earliest[j])
                 if not (arrive < deadline[j] and doable[j]):
                     continue
@@ -89,12 +109,12 @@ def plan_paths(padded: np.ndarray, lengths: np.ndarray, speed: np.ndarray, from_
                         detour += dist[padded[a, n], j] - leg[n]
                     value -= gamma * detour
                 else:
-                    value -= gamma * from_start[a, j]
+                    value -= gamma * from_start[agent, j]
                 if not value > 0:                                # later tasks can only lose
                     continue
                 if n < length:
                     nxt = padded[a, n]
-                    delay = begin + duration[j] + dist[nxt, j] / speed[a]
+                    delay = begin + duration[j] + dist[nxt, j] / speed[agent]
                     delay = max(delay - arrival[a, n], 0.0)
                     if frozen:                                   # nothing already planned may move
                         fits = delay <= start[a, n] - arrival[a, n]
@@ -135,6 +155,7 @@ def plan_paths(padded: np.ndarray, lengths: np.ndarray, speed: np.ndarray, from_
             else:
                 gain[rows[a], j] = best
                 slot[rows[a], j] = best_slot
+    return padded, arrival, start, finish, reward, cost, feasible
 
 
 @jit
