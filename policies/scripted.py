@@ -102,7 +102,8 @@ class CBGAPolicy(Policy):
         actions = np.where(valid.any(axis=1), 1 + np.argmax(np.where(valid, value, -np.inf), axis=1), 0)
         if self.task_quitting:
             quits = mask[:, m + 1:]
-            actions = np.where(quits.any(axis=1), m + 1 + np.argmax(quits, axis=1), actions)
+            if quits.any():
+                actions = np.where(quits.any(axis=1), m + 1 + np.argmax(quits, axis=1), actions)
         return actions
 
 

@@ -207,7 +207,7 @@ class Protocol:
         """
         kn = self.knowledge
         counts = self.view().members if counts is None else counts
-        return ((self.scenario.task_agents > 1)[None, :] & (kn.own_bids() > 0) & ~kn.quit
+        return (~kn.single[None, :] & (kn.groups.own > 0) & ~kn.quit
                 & (counts < self.scenario.task_agents[None, :]))
 
     def quit_options(self) -> np.ndarray:
