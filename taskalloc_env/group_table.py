@@ -159,6 +159,13 @@ class GroupTable:
         self.count[i, j] = 1
         self.own[i, j] = bid if winner == i else 0.0
 
+    def clear_winner(self, i: int, j: int) -> None:
+        """Empty holder i's single-agent column j (``set_winners`` with EMPTY for one column)."""
+        self.members[i, j, 0] = EMPTY
+        self.bids[i, j, 0] = 0.0
+        self.count[i, j] = 0
+        self.own[i, j] = 0.0
+
     def set_winners(self, holders: np.ndarray, tasks: np.ndarray, winner: np.ndarray, bid: np.ndarray) -> None:
         """Overwrite single-agent columns (holder, task) with (winner, bid) pairs in slot 0 (EMPTY clears)."""
         has = winner != EMPTY

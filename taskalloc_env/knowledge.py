@@ -110,5 +110,8 @@ class LocalKnowledge:
         self.bundles[i] = [j for j in self.bundles[i] if j not in gone]
         self.paths[i] = [j for j in self.paths[i] if j not in gone]
         for j in dropped:
-            self.set_bid(i, i, j, 0.0)
+            if not self.single[j]:
+                self.set_bid(i, i, j, 0.0)
+            elif self.groups.members[i, j, 0] == i:     # L_j = 1: i leaves slot 0, in one write
+                self.groups.clear_winner(i, j)
         return dropped[1:]

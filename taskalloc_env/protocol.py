@@ -20,6 +20,7 @@ choice.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import os
 
 import numpy as np
@@ -400,14 +401,14 @@ class Protocol:
     def _release_outbid(self) -> None:
         """Release the first lost bundle task and everything after it (thesis §2.2.4; Johnson (3.11)–(3.12))."""
         kn = self.knowledge
-        own = kn.groups.own.tolist()            # Python floats: one row lookup per bundle task
-        for i, bundle in enumerate(kn.bundles):
-            sequence = bundle if self.cfg.release_order == "bundle" else kn.paths[i]
-            row = own[i]
-            lost = next((j for j in sequence if row[j] <= 0), None)
-            if lost is not None:
-                kn.release(i, lost, self.cfg.release_order)
-                self._dirty.add(i)
+        sizes = np.fromiter(map(len, kn.bundles), dtype=np.int64, count=len(kn.bundles))
+        holders = np.repeat(np.arange(len(sizes)), sizes)
+        tasks = np.fromiter(itertools.chain.from_iterable(kn.bundles), dtype=np.int64, count=len(holders))
+        for i in np.unique(holders[kn.groups.own[holders, tasks] <= 0]).tolist():     # agents that lost a task
+            sequence = kn.bundles[i] if self.cfg.release_order == "bundle" else kn.paths[i]
+            row = kn.groups.own[i].tolist()
+            kn.release(i, next(j for j in sequence if row[j] <= 0), self.cfg.release_order)
+            self._dirty.add(i)
 
     def _reset_quit_timers(self, before: GroupTable, counts: np.ndarray | None = None) -> None:
         """H_i[j] = T when column j of an incomplete held group changed (Alg 9 lines 4–5, ``reset_on``); ``before``

@@ -75,8 +75,8 @@ class ScoringModel:
         self.lam = float(s.time_discount)
         self.gamma = float(s.distance_discount)
         self.speed = s.agent_speed.astype(float)
-        self.dist_agent_task = np.linalg.norm(s.agent_pos[:, None, :] - s.task_pos[None, :, :], axis=2)
-        self.dist_task_task = np.linalg.norm(s.task_pos[:, None, :] - s.task_pos[None, :, :], axis=2)
+        self.dist_agent_task = distances(s.agent_pos, s.task_pos)
+        self.dist_task_task = distances(s.task_pos, s.task_pos)
         self.pay = s.task_reward / s.task_agents if reward_split == "total" else s.task_reward.astype(float)
         self.ready = self._prerequisite_ready(prereq_timing)
         self.earliest = np.maximum(s.task_start, self.ready)
@@ -278,6 +278,14 @@ class ScoringModel:
             live, d = live[carry], slip[carry]
             offset += 1
         return fits, loss
+
+
+def distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(len(a), len(b)) Euclidean distances between 3-D points: ``np.linalg.norm(a[:, None] - b[None], axis=2)``
+    summed in the same order ((dx² + dy²) + dz²), so the same bits, without numpy's slow reduction over an axis
+    of length 3 (a quarter of a millisecond at 100 tasks, once per episode)."""
+    d = a[:, None, :] - b[None, :, :]
+    return np.sqrt((d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) + d[..., 2] * d[..., 2])
 
 
 def _padded(paths: Sequence[Sequence[int]]) -> tuple[np.ndarray, np.ndarray]:

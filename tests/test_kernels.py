@@ -122,6 +122,28 @@ def test_compiled_plan_equals_the_reference(case):
     np.testing.assert_array_equal(got.slot[~ties], want.slot[~ties])
 
 
+@pytest.mark.parametrize("seed", range(100))
+def test_the_plan_kernels_shortcuts_never_change_a_gain(seed):
+    """Insertions worth nearly the full reward (little discount, little travel cost, long paths) and deadlines close
+    behind the finish times of path tasks (short windows, many tasks in a short span): where the plan kernel's
+    shortcuts could matter (``kernels/plan.py``: the bound pay_j − charge, the stop at the first slot that leaves
+    after the deadline), the gains and slots equal the reference's."""
+    rng = np.random.default_rng(seed)
+    n, m = 3, 14
+    cfg = TaskAllocConfig(n_agents=n, n_tasks=m, agents_per_task=1, window=float(rng.choice([0.5, 2.0, 5.0, 40.0])),
+                          duration=float(rng.choice([0.0, 1.0])), time_discount=float(rng.choice([0.01, 0.1])),
+                          distance_discount=float(rng.choice([0.0, 0.01, 0.5])),
+                          start_time_range=(0.0, float(rng.choice([5.0, 30.0]))))
+    scenario = generate(cfg, rng)
+    model = ScoringModel(scenario, marginal_gain=str(rng.choice(["rescore", "frozen"])),
+                         distance_cost=str(rng.choice(["leg", "total"])))
+    paths = [list(rng.permutation(m)[: rng.integers(0, 8)]) for _ in range(n)]
+    got, want = model.plan(range(n), paths), model.plan_reference(range(n), paths)
+    np.testing.assert_allclose(got.gain, want.gain, rtol=1e-12, atol=1e-12)
+    ties = np.isclose(got.gain, want.gain, rtol=1e-12) & (got.slot != want.slot)
+    np.testing.assert_array_equal(got.slot[~ties], want.slot[~ties])
+
+
 @st.composite
 def typed_scenarios(draw, min_agents: int = 1) -> Scenario:
     """Up to 6 agents carrying equipment A or B (or none of any), up to 7 tasks needing 1–3 agents, some with

@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from taskalloc_env import TaskAllocEnv, generate, resolve_config
-from taskalloc_env.scoring import ScoringModel, team_score
+from taskalloc_env.scoring import ScoringModel, distances, team_score
 
 LAM, GAMMA = 0.1, 0.5
 SQRT109 = math.sqrt(109.0)
@@ -352,3 +352,11 @@ def test_team_score_matches_reference_on_generated_scenarios():
             ref, valid = reference_team_score(s, paths, conflict_policy=policy, distance_cost="leg")
             assert ts.score == pytest.approx(ref, abs=1e-9)
             assert set(np.flatnonzero(ts.valid).tolist()) == valid
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 12), st.integers(1, 12), st.integers(0, 2**32 - 1), st.sampled_from([1e-3, 1.0, 1e3]))
+def test_distances_are_numpys_norm_bit_for_bit(n, m, seed, scale):
+    rng = np.random.default_rng(seed)
+    a, b = rng.uniform(-5, 5, (n, 3)) * scale, rng.uniform(-5, 5, (m, 3))
+    assert np.array_equal(distances(a, b), np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2))

@@ -50,6 +50,7 @@ def bid_rows(rows: np.ndarray, count: np.ndarray, ids: np.ndarray, values: np.nd
     m = count.shape[1]
     n_items = required.shape[1]
     any_prereqs = prereqs.any()
+    complete_prereqs = any_prereqs and prereq_mode == ALL_COMPLETE     # reads every column's items
     have = np.zeros((m, n_items), dtype=np.int64)                # items the members carry, per column
     for i in rows:
         lowest_own = np.inf
@@ -59,18 +60,11 @@ def bid_rows(rows: np.ndarray, count: np.ndarray, ids: np.ndarray, values: np.nd
                 lowest_own = min(lowest_own, _value_of(i, count[i, j], ids[i, j], values[i, j]))
         have[:, :] = 0
         for j in range(m):
-            # one pass over the members in id order: count, total, lowest bid and lowest replaceable member
-            total, lowest, victim, victim_bid = 0.0, np.inf, -1, 0.0
-            for c in range(count[i, j]):
-                k, value = ids[i, j, c], values[i, j, c]
-                for e in range(n_items):
-                    if agent_eq[k, e]:
-                        have[j, e] += 1
-                total += value
-                lowest = min(lowest, value)
-                if (not restricted[j] or _replaceable(k, i, required[j], agent_eq)) \
-                        and (victim < 0 or value < victim_bid):
-                    victim, victim_bid = k, value
+            if complete_prereqs or restricted[j]:                # the items only these two rules read
+                for c in range(count[i, j]):
+                    for e in range(n_items):
+                        if agent_eq[ids[i, j, c], e]:
+                            have[j, e] += 1
             b = min(gain[i, j], lowest_own) if warping else gain[i, j]
             bid[i, j] = b
             if single[j]:
@@ -84,6 +78,15 @@ def bid_rows(rows: np.ndarray, count: np.ndarray, ids: np.ndarray, values: np.nd
                 displaced[i, j] = w
                 displaced_bid[i, j] = held
                 continue
+            # one pass over the members in id order: count, total, lowest bid and lowest replaceable member
+            total, lowest, victim, victim_bid = 0.0, np.inf, -1, 0.0
+            for c in range(count[i, j]):
+                k, value = ids[i, j, c], values[i, j, c]
+                total += value
+                lowest = min(lowest, value)
+                if (not restricted[j] or _replaceable(k, i, required[j], agent_eq)) \
+                        and (victim < 0 or value < victim_bid):
+                    victim, victim_bid = k, value
             n_members = count[i, j]
             members[i, j] = n_members
             group_total[i, j] = total

@@ -62,6 +62,10 @@ def plan_paths(flat: np.ndarray, lengths: np.ndarray, agents: np.ndarray, speed:
     reward, cost = np.zeros((count, width)), np.zeros((count, width))
     feasible = np.ones(count, dtype=np.bool_)
     leg = np.zeros(width)
+    # with the reward at arrival, τ − start_j ≥ 0 and λ ≥ 0 make the discount e^{-λ(τ − start_j)} ≤ 1 (rewards are
+    # ≥ 0), and a delay's loss is ≤ 0: pay_j − charge bounds an insertion's value, so a slot that cannot beat the
+    # best so far is skipped before its exponential
+    capped = arrival_time and lam >= 0.0
     for a in range(count):
         agent = agents[a]
         t = 0.0
@@ -102,14 +106,17 @@ def plan_paths(flat: np.ndarray, lengths: np.ndarray, agents: np.ndarray, speed:
                 begin = max(arrive, earliest[j])
                 if not (arrive < deadline[j] and doable[j]):
                     continue
-                value = pay[j] * np.exp(-lam * _lateness(arrive, begin, task_start[j], arrival_time))
                 if leg_cost:
                     detour = to_task
                     if n < length:
                         detour += dist[padded[a, n], j] - leg[n]
-                    value -= gamma * detour
+                    charge = gamma * detour
                 else:
-                    value -= gamma * from_start[agent, j]
+                    charge = gamma * from_start[agent, j]
+                if capped and not pay[j] - charge > max(best, 0.0):
+                    continue                                     # not even the undiscounted reward would win
+                value = pay[j] * np.exp(-lam * _lateness(arrive, begin, task_start[j], arrival_time))
+                value -= charge
                 if not value > 0:                                # later tasks can only lose
                     continue
                 if n < length:
