@@ -50,7 +50,7 @@ def snapshot(knowledge: LocalKnowledge, now: int) -> Snapshot:
     """The messages of round ``now``: each agent stamps itself with T, then copies its table."""
     kn = knowledge
     n = len(kn.timestamps)
-    kn.timestamps[np.arange(n), np.arange(n)] = now
+    np.fill_diagonal(kn.timestamps, now)
     groups = kn.groups.copy()
     return Snapshot(now, groups, kn.timestamps.copy(), kn.known.copy(), 3 * groups.count.sum(axis=1) + n)
 

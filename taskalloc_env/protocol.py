@@ -282,8 +282,9 @@ class Protocol:
         self.round += 1
         self._fail_agents(self.dropouts.get(self.round, ()))
         appeared = self._release_tasks()
-        before = kn.groups.copy()
-        own_before = kn.own_bids() > 0
+        # the groups before the merge: for the quit timers and the quit block (none without quitting)
+        before = kn.groups.copy() if self.cfg.task_quitting or kn.quit_blocked.any() else None
+        own_before = kn.groups.own > 0
         snap = snapshot(kn, self.round)
         self._snapshots[self.round] = snap
         sent = self.network.send(self.round, np.flatnonzero(self.alive), snap.data_items)
@@ -297,12 +298,12 @@ class Protocol:
         self._snapshots = {r: v for r, v in self._snapshots.items() if r >= oldest}
         self._forget_silent()
         c = self.counters
-        c.conflicting_bids += int((own_before & (kn.own_bids() <= 0) & self.alive[:, None]).sum())
+        c.conflicting_bids += int((own_before & (kn.groups.own <= 0) & self.alive[:, None]).sum())
         self._release_outbid()
         counts = kn.member_counts() if self.cfg.task_quitting else None
-        if self.cfg.task_quitting:
+        if before is not None and self.cfg.task_quitting:
             self._reset_quit_timers(before, counts)
-        if kn.quit_blocked.any():          # another agent assigned itself to a quit task: the quitter may return
+        if before is not None and kn.quit_blocked.any():  # another agent joined a quit task: the quitter may return
             kn.quit_blocked &= ~kn.groups.joined(before)
         c.rounds = self.round
         c.messages += traffic.messages
@@ -357,6 +358,8 @@ class Protocol:
     def _release_tasks(self) -> bool:
         """Pop-up tasks due this round become visible to every agent (Johnson §4.1.1: task creation "enters through
         this channel", the listener; our choice: all agents learn of it at once). Returns whether any appeared."""
+        if self.released.all():
+            return False
         due = ~self.released & (self.release_tick <= self.round)
         self.released |= due
         return bool(due.any())
