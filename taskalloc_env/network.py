@@ -202,7 +202,10 @@ class Network:
         if key not in self._link_cache:
             sending = np.zeros(self.graph.n_agents, dtype=bool)
             sending[senders] = True
-            self._link_cache[key] = np.nonzero(self.graph.adjacency & sending[:, None])
+            links = np.nonzero(self.graph.adjacency & sending[:, None])
+            for array in links:             # shared with the queue: never written
+                array.setflags(write=False)
+            self._link_cache[key] = links
         return self._link_cache[key]
 
     def deliver(self, now: int, alive: np.ndarray) -> Deliveries:
