@@ -61,8 +61,8 @@ class GroupTable:
 
     __hash__ = None                                       # type: ignore[assignment]  # mutable
 
-    def same_table(self, i: int, h: int) -> bool:
-        """Holders i and h hold the same table (X_i = X_h)."""
+    def same_table(self, i: int | np.ndarray, h: int | np.ndarray) -> bool:
+        """Holders i and h hold the same table (X_i = X_h); with arrays of holders, every pair (i[q], h[q]) does."""
         return (np.array_equal(self.count[i], self.count[h]) and np.array_equal(self.members[i], self.members[h])
                 and np.array_equal(self.bids[i], self.bids[h]))
 

@@ -443,4 +443,5 @@ class Protocol:
         """Every pair of live agents in one connected component holds the same table (thesis §3.2.3's consensus)."""
         groups = self.knowledge.groups
         comp = self.live_graph.component
-        return all(groups.same_table(i, comp[i]) for i in np.flatnonzero(self.alive))
+        live = np.flatnonzero(self.alive)
+        return groups.same_table(live, comp[live])

@@ -132,6 +132,18 @@ def test_bid_reaches_the_far_end_after_d_rounds(agents_per_task):
         assert knows.tolist() == [a <= r for a in range(5)], f"after round {r}"
 
 
+def test_agreement_holds_only_once_every_table_in_the_component_is_the_same():
+    """``Protocol.agreement`` (thesis §3.2.3): on a line of 5 a bid is known up to agent r after round r, so the
+    tables differ until round 4 and agree from then on."""
+    p = line_protocol(5, [task(2)])
+    p.bid(0, 0)
+    seen = []
+    for _ in range(5):
+        p.end_round()
+        seen.append(p.agreement())
+    assert seen == [False, False, False, True, True]
+
+
 def test_timestamps_follow_2_4():
     """s_ik = τ for neighbours; otherwise the freshest neighbour value (relayed one hop per round); s_ii = τ."""
     p = line_protocol(5, [task(2)])
