@@ -104,7 +104,7 @@ def plan_paths(flat: np.ndarray, lengths: np.ndarray, agents: np.ndarray, speed:
                 to_task = from_start[agent, j] if n == 0 else dist[padded[a, n - 1], j]
                 arrive = free + to_task / speed[agent]
                 begin = max(arrive, earliest[j])
-                if not (arrive < deadline[j] and doable[j]):
+                if not arrive < deadline[j]:
                     continue
                 if leg_cost:
                     detour = to_task
