@@ -124,16 +124,32 @@ class GroupTable:
     # -- writes ------------------------------------------------------------------------------------------------
     def set(self, i: int, k: int, j: int, value: float) -> None:
         """X_i[k][j] = value: k joins (or re-bids in) j's group if value > 0, leaves it otherwise."""
-        members, bids = self.members[i, j], self.bids[i, j]
         n = int(self.count[i, j])
+        if self.capacity[j] == 1:           # a single-agent column: slot 0 only, no order to keep
+            present = n == 1 and self.members[i, j, 0] == k
+            if value > 0:
+                if not present and n:
+                    raise self._overflow(i, k, j, n)
+                self.members[i, j, 0], self.bids[i, j, 0], self.count[i, j] = k, value, 1
+            elif present:
+                self.members[i, j, 0], self.bids[i, j, 0], self.count[i, j] = EMPTY, 0.0, 0
+            else:
+                return
+        elif not self._set_member(i, k, j, value, n):
+            return
+        if k == i:
+            self.own[i, j] = value if value > 0 else 0.0
+
+    def _set_member(self, i: int, k: int, j: int, value: float, n: int) -> bool:
+        """``set`` on a column of L_j > 1 with ``n`` members, kept in increasing id order; whether it changed."""
+        members, bids = self.members[i, j], self.bids[i, j]
         ids = members.tolist()
         at = bisect.bisect_left(ids, k, 0, n)
         present = at < n and ids[at] == k
         if value > 0:
             if not present:
                 if n >= self.capacity[j]:
-                    raise GroupOverflow(f"agent {k} would be member {n + 1} of task {j}'s group in agent {i}'s "
-                                        f"table (L_j = {self.capacity[j]})")
+                    raise self._overflow(i, k, j, n)
                 if at < n:
                     members[at + 1: n + 1] = members[at: n]
                     bids[at + 1: n + 1] = bids[at: n]
@@ -147,24 +163,12 @@ class GroupTable:
             members[n - 1], bids[n - 1] = EMPTY, 0.0
             self.count[i, j] = n - 1
         else:
-            return
-        if k == i:
-            self.own[i, j] = value if value > 0 else 0.0
+            return False
+        return True
 
-    def set_winner(self, i: int, j: int, winner: int, bid: float) -> None:
-        """Overwrite holder i's single-agent column j with one member ``winner`` (not EMPTY) bidding ``bid`` > 0
-        (``set_winners`` for one column)."""
-        self.members[i, j, 0] = winner
-        self.bids[i, j, 0] = bid
-        self.count[i, j] = 1
-        self.own[i, j] = bid if winner == i else 0.0
-
-    def clear_winner(self, i: int, j: int) -> None:
-        """Empty holder i's single-agent column j (``set_winners`` with EMPTY for one column)."""
-        self.members[i, j, 0] = EMPTY
-        self.bids[i, j, 0] = 0.0
-        self.count[i, j] = 0
-        self.own[i, j] = 0.0
+    def _overflow(self, i: int, k: int, j: int, n: int) -> GroupOverflow:
+        return GroupOverflow(f"agent {k} would be member {n + 1} of task {j}'s group in agent {i}'s table "
+                             f"(L_j = {self.capacity[j]})")
 
     def set_winners(self, holders: np.ndarray, tasks: np.ndarray, winner: np.ndarray, bid: np.ndarray) -> None:
         """Overwrite single-agent columns (holder, task) with (winner, bid) pairs in slot 0 (EMPTY clears)."""

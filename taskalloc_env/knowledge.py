@@ -89,12 +89,9 @@ class LocalKnowledge:
         propagates the eviction)."""
         self.bundles[i].append(j)
         self.paths[i].insert(slot, j)
-        if self.single[j]:              # L_j = 1: i takes slot 0 from the winner it displaces, in one write
-            self.groups.set_winner(i, j, i, bid)
-        else:
-            if displaced != NONE:
-                self.set_bid(i, displaced, j, 0.0)
-            self.set_bid(i, i, j, bid)
+        if displaced != NONE:
+            self.set_bid(i, displaced, j, 0.0)
+        self.set_bid(i, i, j, bid)
         self.assigned_at[i, j] = now
 
     def release(self, i: int, lost: int, order: str) -> list[int]:
@@ -110,8 +107,5 @@ class LocalKnowledge:
         self.bundles[i] = [j for j in self.bundles[i] if j not in gone]
         self.paths[i] = [j for j in self.paths[i] if j not in gone]
         for j in dropped:
-            if not self.single[j]:
-                self.set_bid(i, i, j, 0.0)
-            elif self.groups.members[i, j, 0] == i:     # L_j = 1: i leaves slot 0, in one write
-                self.groups.clear_winner(i, j)
+            self.set_bid(i, i, j, 0.0)
         return dropped[1:]

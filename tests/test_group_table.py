@@ -48,3 +48,13 @@ def test_a_write_beyond_the_group_size_is_refused():
     with pytest.raises(GroupOverflow, match="member 3 of task 0's group in agent 0's table"):
         table.set(0, 1, 0, 3.0)
     assert table.members[0, 0].tolist() == [0, 2] and table.bids[0, 0].tolist() == [5.0, 4.0]
+
+
+def test_a_single_agent_column_holds_one_member():
+    table = GroupTable.empty(2, 2, np.array([1, 3]))
+    table.set(0, 1, 0, 5.0)
+    with pytest.raises(GroupOverflow, match="member 2 of task 0's group in agent 0's table"):
+        table.set(0, 0, 0, 6.0)
+    table.set(0, 1, 0, 0.0)
+    table.set(0, 0, 0, 6.0)
+    assert (table.members[0, 0, 0], table.bids[0, 0, 0], table.count[0, 0], table.own[0, 0]) == (0, 6.0, 1, 6.0)

@@ -85,13 +85,8 @@ def plan_paths(flat: np.ndarray, lengths: np.ndarray, agents: np.ndarray, speed:
         feasible[a] = ok_path
         if not gains:
             continue
-        for r in range(length):                                  # a task on the path has no gain
-            gain[rows[a], padded[a, r]] = 0.0
-            slot[rows[a], padded[a, r]] = -1
         for j in range(m):                                       # (3.11): the best feasible insertion of j
-            if slot[rows[a], j] == -1 and gain[rows[a], j] == 0.0 and _on_path(padded[a], length, j):
-                continue
-            if not doable[j]:                                    # no slot is feasible
+            if not doable[j] or _on_path(padded[a], length, j):  # no slot is feasible, or j is already planned
                 gain[rows[a], j] = 0.0
                 slot[rows[a], j] = -1
                 continue
