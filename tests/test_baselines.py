@@ -27,6 +27,7 @@ from helpers import (
 from policies import CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy, exact, make_policy, rollout, sgama
 from taskalloc_env import TaskAllocConfig, TaskAllocEnv, generate
 from taskalloc_env.cbba_table import NONE
+from taskalloc_env.config import from_mapping
 
 VARIANTS = [CBGAPolicy(), CBGAPolicy(task_quitting=True), CBGAPolicy(team_bidding=True),
             CBGAPolicy(team_bidding=True, task_quitting=True)]
@@ -333,6 +334,23 @@ def test_exact_matches_brute_force():
             if replay(s, 0, p0).feasible and replay(s, 1, p1).feasible:
                 best = max(best, score)
         assert exact(s, cfg).score == pytest.approx(best)
+
+
+@pytest.mark.parametrize("kind", ["equipment", "prerequisites"])
+@pytest.mark.parametrize("seed", range(8))
+def test_exact_matches_brute_force_with_equipment_and_prerequisites(kind, seed):
+    """Three agents over three tasks, every combination of ordered paths: the dynamic programme's states (members
+    and equipment items per task) and its final checks (equipment, prerequisites) find the best valid allocation."""
+    extra = ({"agent_types": ["A", "B"], "task_mix": [{"count": 2, "equipment": ["A", "B"]}, {"count": 1, "agents": 1}]}
+             if kind == "equipment" else
+             {"agents_per_task": (1, 2), "prerequisites": {"chains": 1, "length": 3, "followup_window": False}})
+    cfg = from_mapping({"n_agents": 3, "n_tasks": 3, "start_time_range": (0.0, 15.0), **extra})
+    s = generate(cfg, np.random.default_rng(seed))
+    orders = [p for r in range(4) for p in itertools.permutations(range(3), r)]
+    feasible = [[p for p in orders if replay(s, i, p).feasible and all(s.eligible()[i, j] for j in p)]
+                for i in range(3)]
+    best = max(reference_team_score(s, paths)[0] for paths in itertools.product(*feasible))
+    assert exact(s, cfg).score == pytest.approx(best)
 
 
 # -- quitting and team bidding where the thesis says they matter (thesis §5.3.2, Figs 5.7 / 5.13) --------------------
