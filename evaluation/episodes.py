@@ -76,8 +76,8 @@ def skip_reason(solver: str, cfg: TaskAllocConfig) -> str | None:
         return f"{key.upper()} assigns single-agent tasks only (every L_j = 1)"
     if key == "cbba-duo" and (max_required_agents(cfg) > 1 or cfg.prerequisites or cfg.comm_range is not None):
         return "preferred-duo CBBA splits single-agent tasks without prerequisites, with full communication"
-    if key == "exact" and (cfg.n_agents > MAX_AGENTS or cfg.n_tasks > MAX_TASKS):
-        return f"exact enumerates; at most {MAX_AGENTS} agents x {MAX_TASKS} tasks"
+    if key in ("exact", "oracle") and (cfg.n_agents > MAX_AGENTS or cfg.n_tasks > MAX_TASKS):
+        return f"{key} needs the exact optimum, which enumerates; at most {MAX_AGENTS} agents x {MAX_TASKS} tasks"
     return None
 
 

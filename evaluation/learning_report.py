@@ -8,7 +8,8 @@ baselines on held-out instances.
 ``evaluate`` plays every row of a setting on the held-out seeds 10000 … (``evaluation.seeds.TEST_SEEDS``), through
 the experiment runner's ``run_episodes`` (seed s is the same instance for every row; ``--backend ray`` fans out over
 Ray), and writes per-seed figures to ``results/learning/heldout_<setting>.json``. Rows: the baselines (random,
-CBGA, CBGABI, SGAMA, the exact optimum where it is tractable, behaviour cloning of CBGABI) and, per learned
+CBGA, CBGABI, SGAMA, the exact optimum where it is tractable, the oracle that bids along the optimum through the
+protocol, ``policies.oracle``, behaviour cloning of CBGABI) and, per learned
 configuration, one row per training seed, read from ``<runs>/<config>/seed<k>`` (the training commands'
 ``--out-dir``; ``models/<name>`` for seeds that are committed models). It also copies each run's ``eval.csv`` and
 ``summary.yaml`` to ``results/learning/runs/``, so that ``render`` needs nothing outside the repository. Rows
@@ -93,7 +94,7 @@ class Setting:
     scenario: str
     overrides: Mapping[str, Any]
     configs: tuple[Config, ...]
-    baselines: tuple[str, ...] = ("random", "cbga", "cbgabi", "sgama", "exact")
+    baselines: tuple[str, ...] = ("random", "cbga", "cbgabi", "sgama", "exact", "oracle")
     behaviour_cloning: bool = False
     # a setting on the same instances with only network overrides: its centralised rows (SGAMA, the exact optimum)
     # send no message, so they are copied from there instead of being solved again
@@ -119,7 +120,8 @@ SETTINGS = {s.name: s for s in (
             "default", {"message_loss": 0.2}, (LOSS, LOSS_POOLING)),
 )}
 NAMES = {"random": "random", "cbga": "CBGA", "cbgabi": "CBGABI", "sgama": "SGAMA (centralised greedy)",
-         "exact": "exact optimum", "bc": "behaviour cloning of CBGABI (SB3, 1 seed)"}
+         "exact": "exact optimum", "oracle": "oracle: the optimum's paths bid through the protocol (privileged)",
+         "bc": "behaviour cloning of CBGABI (SB3, 1 seed)"}
 
 
 # -- evaluate ----------------------------------------------------------------------------------------------------

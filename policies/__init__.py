@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from policies.base import Policy
 from policies.centralised import exact, sgama
+from policies.oracle import OraclePolicy
 from policies.registry import POLICY_NAMES, make_policy
 from policies.rollout import rollout
 from policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
@@ -13,6 +14,7 @@ __all__ = [
     "ACBBAPolicy",
     "CBBAPolicy",
     "CBGAPolicy",
+    "OraclePolicy",
     "PassPolicy",
     "Policy",
     "RandomPolicy",

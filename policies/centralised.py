@@ -14,8 +14,8 @@ Appendix A.1) and the scripted policies' task order, one rule everywhere, so tha
 
 ``exact``: the optimum of the team score (``scoring.team_score``) for small instances, at most ``MAX_AGENTS`` = 6 agents
 and ``MAX_TASKS`` = 9 tasks. The time grows with how many tasks one agent can chain: on a 2-core machine,
-``train_small`` (4 × 8, L_j ∈ {1, 2}) takes 0.09 s CPU per instance on average (at most 0.4 s over 4,250 instances),
-6 × 9 under a second. Every agent flies its own
+``train_small`` (4 × 8, L_j ∈ {1, 2}) takes 0.08 s CPU per instance on average (at most 0.23 s over the 200
+held-out instances; docs/benchmarks.md, "The exact optimum"), 6 × 9 about a second. Every agent flies its own
 path (timing (3.8)–(3.10)), only valid tasks pay, travel always costs. Joining a task that ends up invalid only
 costs, so an optimum uses valid tasks only. Two exact steps:
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from policies.base import Policy
+from policies.oracle import OraclePolicy
 from policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
 
 FACTORIES: dict[str, Callable[..., Policy]] = {
@@ -22,6 +23,7 @@ FACTORIES: dict[str, Callable[..., Policy]] = {
     "cbga+tq": lambda **kw: CBGAPolicy(task_quitting=True, **kw),
     "cbga+tb": lambda **kw: CBGAPolicy(team_bidding=True, **kw),
     "cbgabi": lambda **kw: CBGAPolicy(team_bidding=True, task_quitting=True, **kw),
+    "oracle": OraclePolicy,
 }
 # name parameters: policy name -> {parameter in the name: keyword of its factory}
 PARAMETERS: dict[str, dict[str, str]] = {"cbga+tq": {"delta": "quit_threshold"},
@@ -53,7 +55,8 @@ def parse_name(name: str) -> tuple[str, dict[str, int]]:
 
 def make_policy(name: str, **kwargs) -> Policy:
     """``random``, ``pass``, ``cbba``, ``acbba``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi`` (``cbga+tq:delta=3``,
-    ``cbgabi:delta=3``: with the quit threshold δ) or ``learned:<checkpoint>``."""
+    ``cbgabi:delta=3``: with the quit threshold δ), ``oracle`` (privileged: bids along the exact optimum) or
+    ``learned:<checkpoint>``."""
     if name.lower().startswith("learned:"):
         from policies.learned import LearnedPolicy
 

@@ -24,10 +24,20 @@ from helpers import (
     task,
 )
 
-from policies import CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy, exact, make_policy, rollout, sgama
+from policies import (
+    CBBAPolicy,
+    CBGAPolicy,
+    OraclePolicy,
+    PassPolicy,
+    RandomPolicy,
+    exact,
+    make_policy,
+    rollout,
+    sgama,
+)
 from taskalloc_env import TaskAllocConfig, TaskAllocEnv, generate
 from taskalloc_env.cbba_table import NONE
-from taskalloc_env.config import from_mapping
+from taskalloc_env.config import from_mapping, resolve_config
 
 VARIANTS = [CBGAPolicy(), CBGAPolicy(task_quitting=True), CBGAPolicy(team_bidding=True),
             CBGAPolicy(team_bidding=True, task_quitting=True)]
@@ -351,6 +361,22 @@ def test_exact_matches_brute_force_with_equipment_and_prerequisites(kind, seed):
                 for i in range(3)]
     best = max(reference_team_score(s, paths)[0] for paths in itertools.product(*feasible))
     assert exact(s, cfg).score == pytest.approx(best)
+
+
+def test_the_oracle_reaches_the_optimum_through_the_protocol_on_train_small():
+    """Bidding along the exact optimum's paths through the consensus reaches exactly the optimum on train_small: the
+    environment's action space is not what keeps a learned bidder below it (docs/learning.md)."""
+    env = TaskAllocEnv(resolve_config("train_small"))
+    for seed in range(8):
+        reached = rollout(env, OraclePolicy(), seed=seed)
+        best = exact(env.scenario, env.config)
+        assert reached.paths == best.paths and reached.score == best.score
+
+
+def test_the_oracle_names_the_size_limit_of_the_optimum():
+    env = TaskAllocEnv(resolve_config("default"))
+    with pytest.raises(ValueError, match="at most 6 agents and 9 tasks"):
+        rollout(env, make_policy("oracle"), seed=0)
 
 
 # -- quitting and team bidding where the thesis says they matter (thesis §5.3.2, Figs 5.7 / 5.13) --------------------
