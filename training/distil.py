@@ -38,14 +38,13 @@ from evaluation.episodes import evaluate
 from evaluation.seeds import DEMO_SEED_START, VALIDATION_SEED_START
 from policies import checkpoint, make_policy
 from policies.learned import LearnedPolicy
-from policies.networks import AttentionActor, PoolingActor
 from policies.oracle import OraclePolicy
 from taskalloc_env.config import PROTOCOL_FIELDS, resolve_config
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
 from training.config import check_at_least, check_types, opt, parse, plain, prepare_out_dir
+from training.mappo import ACTORS, make_actor
 
-ACTORS = ("attention", "pooling")
 COLUMNS = ("iteration", "beta", "episodes", "samples", "loss", "train_agreement", "validation_agreement",
            "first_round_agreement", "later_rounds_agreement", "cbgabi_agreement", "score", "ratio_cbgabi",
            "ratio_optimum", "wall_time")
@@ -97,15 +96,9 @@ class Decisions:
     targets: np.ndarray     # (S, A) bool
     first_round: np.ndarray  # (S,) bool: taken before any message was exchanged
 
-    def __add__(self, other: Decisions) -> Decisions:
-        return Decisions(*(np.concatenate([a, b]) for a, b in
-                           zip(dataclasses.astuple(self), dataclasses.astuple(other))))
-
-
-def make_actor(cfg: DistilConfig, own_size: int, task_size: int) -> nn.Module:
-    if cfg.actor == "attention":
-        return AttentionActor(own_size, task_size, cfg.hidden, cfg.heads, cfg.layers)
-    return PoolingActor(own_size, task_size, cfg.hidden)
+    @classmethod
+    def concat(cls, parts: Sequence[Decisions]) -> Decisions:
+        return cls(*(np.concatenate(arrays) for arrays in zip(*(dataclasses.astuple(p) for p in parts))))
 
 
 def greedy(actor: nn.Module, obs: np.ndarray, masks: np.ndarray) -> np.ndarray:
@@ -134,10 +127,7 @@ def play(env: TaskAllocEnv, oracle: OraclePolicy, actor: nn.Module, seeds: Seque
             else:
                 actions = dict(zip(agents, greedy(actor, obs, masks).tolist()))
             observations, *_ = env.step(actions)
-    out = rows[0]
-    for r in rows[1:]:
-        out = out + r
-    return out
+    return Decisions.concat(rows)
 
 
 def set_loss(logits: th.Tensor, targets: th.Tensor) -> th.Tensor:
@@ -213,7 +203,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         seeds = range(first + it * cfg.episodes, first + (it + 1) * cfg.episodes)
         actor.eval()
         new = play(env, oracle, actor, seeds, beta, rng)
-        data = new if data is None else data + new
+        data = new if data is None else Decisions.concat([data, new])
         actor.train()
         loss = fit(actor, optimizer, data, cfg, rng)
         actor.eval()

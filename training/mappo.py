@@ -37,7 +37,7 @@ import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import torch as th
@@ -197,7 +197,16 @@ class Group:
 
 
 # -- networks ---------------------------------------------------------------------------------------------------------
-def make_actor(cfg: MappoConfig, own_size: int, task_size: int) -> nn.Module:
+class ActorSpec(Protocol):
+    """The config fields an actor is built from (``MappoConfig``, ``training.distil.DistilConfig``)."""
+
+    actor: str
+    hidden: int
+    heads: int
+    layers: int
+
+
+def make_actor(cfg: ActorSpec, own_size: int, task_size: int) -> nn.Module:
     if cfg.actor == "attention":
         return AttentionActor(own_size, task_size, cfg.hidden, cfg.heads, cfg.layers)
     return PoolingActor(own_size, task_size, cfg.hidden)
