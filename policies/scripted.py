@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from policies.base import Policy
+from taskalloc_env.observation import ObservationLayout
 
 TEAM_VALUES = ("net", "literal")
 
@@ -74,10 +75,13 @@ class CBGAPolicy(Policy):
         agents = list(observations)
         masks = np.stack([observations[a]["action_mask"] for a in agents]).astype(bool)
         obs = np.stack([observations[a]["observation"] for a in agents])
-        layout = self.layout
+        return dict(zip(agents, self.decide(obs, masks, self.layout).tolist()))
+
+    def decide(self, obs: np.ndarray, masks: np.ndarray, layout: ObservationLayout) -> np.ndarray:
+        """Actions (A,) from stacked observations (A, D) of ``layout`` and boolean masks (A, 1 + 2M)."""
         # task j's column c sits at own_size + j · task_size + c: every task's value of one column is a strided slice
         columns = (obs[:, layout.own_size + layout.task_column(name)::layout.task_size] for name in self.columns)
-        return dict(zip(agents, self.choose(masks, *columns).tolist()))
+        return self.choose(masks, *columns)
 
     @property
     def columns(self) -> tuple[str, ...]:

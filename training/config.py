@@ -18,7 +18,7 @@ from typing import Any, TypeVar
 import yaml
 
 from taskalloc_env import resources
-from taskalloc_env.config import read_yaml
+from taskalloc_env.config import PROTOCOL_FIELDS, read_yaml
 from taskalloc_env.errors import ConfigError
 
 C = TypeVar("C")
@@ -52,6 +52,14 @@ def check_at_least(cfg: Any, names: Sequence[str], minimum: int, what: str = "tr
     for name in names:
         if getattr(cfg, name) < minimum:
             raise ConfigError(f"{what} field {name!r}: got {getattr(cfg, name)!r}; allowed: an integer >= {minimum}")
+
+
+def check_protocol_options(cfg: Any, hint: str = "", what: str = "training") -> None:
+    """``cfg.env_overrides`` names protocol options only (the options a policy plays with, saved in its
+    checkpoint); ``hint`` is added to the error."""
+    unknown = sorted(set(cfg.env_overrides) - set(PROTOCOL_FIELDS))
+    if unknown:
+        raise ConfigError(f"{what} field 'env_overrides': {unknown} are not protocol options{hint}")
 
 
 def coerce(cls: type, name: str, value: Any) -> Any:

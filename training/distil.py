@@ -39,11 +39,11 @@ from evaluation.seeds import DEMO_SEED_START, VALIDATION_SEED_START
 from policies import checkpoint, make_policy
 from policies.learned import LearnedPolicy
 from policies.oracle import OraclePolicy
-from taskalloc_env.config import PROTOCOL_FIELDS, resolve_config
+from taskalloc_env.config import resolve_config
 from taskalloc_env.env import TaskAllocEnv
-from taskalloc_env.errors import ConfigError, run_cli
-from training.config import check_at_least, check_types, opt, parse, plain, prepare_out_dir
-from training.mappo import ACTORS, make_actor
+from taskalloc_env.errors import run_cli
+from training.config import check_at_least, check_protocol_options, check_types, opt, parse, plain, prepare_out_dir
+from training.mappo import check_actor, make_actor
 
 COLUMNS = ("iteration", "beta", "episodes", "samples", "loss", "train_agreement", "validation_agreement",
            "first_round_agreement", "later_rounds_agreement", "cbgabi_agreement", "score", "ratio_cbgabi",
@@ -77,14 +77,11 @@ class DistilConfig:
 
     def check(self) -> None:
         check_types(self)
-        if self.actor not in ACTORS:
-            raise ConfigError(f"training field 'actor': got {self.actor!r}; allowed: {' | '.join(ACTORS)}")
         check_at_least(self, ("hidden", "heads", "layers", "iterations", "episodes", "epochs", "batch_size",
                               "eval_episodes", "torch_threads"), 1)
         check_at_least(self, ("seed",), 0)
-        unknown = sorted(set(self.env_overrides) - set(PROTOCOL_FIELDS))
-        if unknown:
-            raise ConfigError(f"training field 'env_overrides': {unknown} are not protocol options")
+        check_actor(self)
+        check_protocol_options(self)
 
 
 @dataclasses.dataclass
@@ -162,11 +159,8 @@ def agreement(choices: np.ndarray, targets: np.ndarray, rows: np.ndarray | None 
 
 
 def cbgabi_choices(env: TaskAllocEnv, data: Decisions) -> np.ndarray:
-    """CBGABI's rule (``CBGAPolicy.choose``) on the same states, for comparison."""
-    rule = make_policy("cbgabi")
-    layout = env.observation_layout
-    columns = (data.obs[:, layout.own_size + layout.task_column(name)::layout.task_size] for name in rule.columns)
-    return rule.choose(data.masks, *columns)
+    """CBGABI's rule (``CBGAPolicy.decide``) on the same states, for comparison."""
+    return make_policy("cbgabi").decide(data.obs, data.masks, env.observation_layout)
 
 
 def main(argv: Sequence[str] | None = None) -> dict[str, Any]:

@@ -50,10 +50,18 @@ from evaluation.seeds import TEST_SEEDS, VALIDATION_SEED_START
 from policies import checkpoint, make_policy
 from policies.learned import LearnedPolicy, resolve
 from policies.networks import AttentionActor, PoolingActor, count_parameters
-from taskalloc_env.config import PROTOCOL_FIELDS, resolve_config
+from taskalloc_env.config import resolve_config
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
-from training.config import check_at_least, check_types, opt, parse, plain, prepare_out_dir
+from training.config import (
+    check_at_least,
+    check_protocol_options,
+    check_types,
+    opt,
+    parse,
+    plain,
+    prepare_out_dir,
+)
 from training.critic import StateCritic
 
 ACTORS = ("attention", "pooling")
@@ -114,17 +122,12 @@ class MappoConfig:
     def check(self) -> None:
         """Bad values raise ``ConfigError`` naming the field and what is allowed."""
         check_types(self)
-        if self.actor not in ACTORS:
-            raise ConfigError(f"training field 'actor': got {self.actor!r}; allowed: {' | '.join(ACTORS)}")
         check_at_least(self, ("hidden", "heads", "layers", "n_steps", "n_epochs", "n_minibatches", "torch_threads",
                               "max_cycles", "eval_episodes"), 1)
         check_at_least(self, ("total_steps", "eval_freq"), 0)
-        if self.hidden % self.heads:
-            raise ConfigError(f"training field 'hidden': {self.hidden} must be a multiple of heads={self.heads}")
-        unknown = sorted(set(self.env_overrides) - set(PROTOCOL_FIELDS))
-        if unknown:
-            raise ConfigError(f"training field 'env_overrides': {unknown} are not protocol options; scenario fields "
-                              "and network conditions go into the mixture entries' overrides")
+        check_actor(self)
+        check_protocol_options(self, "; scenario fields and network conditions go into the mixture entries' "
+                                     "overrides")
         if not self.mixture:
             raise ConfigError("training field 'mixture': needs at least one entry")
         for entry in self.mixture:
@@ -204,6 +207,14 @@ class ActorSpec(Protocol):
     hidden: int
     heads: int
     layers: int
+
+
+def check_actor(cfg: ActorSpec) -> None:
+    """A known actor network, and a width the attention heads divide (``ConfigError`` naming the field)."""
+    if cfg.actor not in ACTORS:
+        raise ConfigError(f"training field 'actor': got {cfg.actor!r}; allowed: {' | '.join(ACTORS)}")
+    if cfg.hidden % cfg.heads:
+        raise ConfigError(f"training field 'hidden': {cfg.hidden} must be a multiple of heads={cfg.heads}")
 
 
 def make_actor(cfg: ActorSpec, own_size: int, task_size: int) -> nn.Module:
