@@ -8,7 +8,7 @@ environment (e.g. ``task_quitting`` for CBGA with task quitting); runners build 
 from __future__ import annotations
 
 import abc
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -64,3 +64,11 @@ class Policy(abc.ABC):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r})"
+
+
+def stack_observations(observations: Mapping[str, Mapping[str, np.ndarray]], agents: Sequence[str]
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """The ``agents``' observations (A, D) and action masks (A, 1 + 2M), stacked in that order (``np.array`` on the
+    rows: the same array as ``np.stack``, a few times faster on a step's handful of rows)."""
+    return (np.array([observations[a]["observation"] for a in agents]),
+            np.array([observations[a]["action_mask"] for a in agents]))

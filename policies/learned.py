@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from policies.base import Policy
+from policies.base import Policy, stack_observations
 from policies.checkpoint import Checkpoint, CheckpointError, load
 from taskalloc_env import resources
 from taskalloc_env.observation import FAULT_FEATURES, POPUP_FEATURES, ObservationLayout
@@ -97,10 +97,9 @@ class LearnedPolicy(Policy):
         if not observations:
             return {}
         agents = list(observations)
-        obs = np.stack([observations[a]["observation"] for a in agents])
+        obs, masks = stack_observations(observations, agents)
         if self.columns is not None:
             obs = obs[:, self.columns]
-        masks = np.stack([observations[a]["action_mask"] for a in agents])
         logits = masked_logits(self.actor, obs, masks).cpu().numpy().astype(np.float64)
         logits[masks == 0] = -np.inf
         probs = np.exp(logits - logits.max(axis=1, keepdims=True))

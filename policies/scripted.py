@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from policies.base import Policy
+from policies.base import Policy, stack_observations
 from taskalloc_env.observation import ObservationLayout
 
 TEAM_VALUES = ("net", "literal")
@@ -73,9 +73,8 @@ class CBGAPolicy(Policy):
         if not observations:
             return {}
         agents = list(observations)
-        masks = np.stack([observations[a]["action_mask"] for a in agents]).astype(bool)
-        obs = np.stack([observations[a]["observation"] for a in agents])
-        return dict(zip(agents, self.decide(obs, masks, self.layout).tolist()))
+        obs, masks = stack_observations(observations, agents)
+        return dict(zip(agents, self.decide(obs, masks.astype(bool), self.layout).tolist()))
 
     def decide(self, obs: np.ndarray, masks: np.ndarray, layout: ObservationLayout) -> np.ndarray:
         """Actions (A,) from stacked observations (A, D) of ``layout`` and boolean masks (A, 1 + 2M)."""

@@ -74,12 +74,16 @@ def exchange(knowledge: LocalKnowledge, deliveries: Deliveries, snapshots: dict[
         np.fill_diagonal(knowledge.timestamps, now)
         return Traffic(messages=0, informative=0, data_items=0)
     kn = knowledge
-    sent = np.unique(deliveries.sent)                   # the send rounds, ascending
-    slot = np.searchsorted(sent, deliveries.sent)
+    first, last = int(deliveries.sent.min()), int(deliveries.sent.max())
+    if first == last:                                   # one send round (always on links without delay)
+        sent, slot = np.array([first]), np.zeros(len(deliveries), dtype=np.int64)
+    else:
+        sent = np.unique(deliveries.sent)               # the send rounds, ascending
+        slot = np.searchsorted(sent, deliveries.sent)
     stack = [snapshots[r] for r in sent.tolist()]
 
     def stacked(arrays: list[np.ndarray]) -> np.ndarray:
-        return arrays[0][None] if len(arrays) == 1 else np.stack(arrays)
+        return arrays[0][None] if len(arrays) == 1 else np.array(arrays)
 
     g = kn.groups
     informative = exchange_all(
@@ -88,7 +92,7 @@ def exchange(knowledge: LocalKnowledge, deliveries: Deliveries, snapshots: dict[
         stacked([snap.stamps for snap in stack]), stacked([snap.known for snap in stack]), deliveries.receiver,
         deliveries.sender, slot, float(now), kn.single, required_agents, equipment.restricted, equipment.required,
         equipment.agent, table == "canonical")
-    items = sum(int(snap.data_items[deliveries.sender[slot == q]].sum()) for q, snap in enumerate(stack))
+    items = int(stacked([snap.data_items for snap in stack])[slot, deliveries.sender].sum())
     return Traffic(messages=len(deliveries), informative=int(informative), data_items=items)
 
 

@@ -69,6 +69,7 @@ from taskalloc_env.scenario import Scenario, generate, scenario_config
 PASS = 0
 INVALID_ACTION_MODES = ("noop", "raise")
 DTYPES = ("float32", "float64")
+_MISSING = object()                # an agent the action dict leaves out
 
 
 class TaskAllocEnv(ParallelEnv):
@@ -272,14 +273,18 @@ class TaskAllocEnv(ParallelEnv):
             for a in self.agents:
                 flags[a] = message
         masks = self._masks                     # the masks handed out with the last observations
+        allowed = self._allowed                 # the same masks as lists: a plain int is checked in two lookups
         decisions = []
         for agent in self.agents:
             i = self.agent_index[agent]
-            if agent not in actions:
+            raw = actions.get(agent, _MISSING)
+            if type(raw) is int and 0 <= raw < len(allowed[i]) and allowed[i][raw]:
+                action, problem = raw, None
+            elif raw is _MISSING:
                 problem = f"no action given for {agent}"
                 action = None
             else:
-                action, problem = self._check_action(agent, actions[agent], masks[i])
+                action, problem = self._check_action(agent, raw, masks[i])
             if problem:
                 if self.invalid_action == "raise":
                     raise InvalidActionError(problem)
@@ -334,6 +339,7 @@ class TaskAllocEnv(ParallelEnv):
     def _observations(self) -> dict[str, dict[str, np.ndarray]]:
         obs = self._builder.build(self.protocol, self._passed, self.dtype)
         self._masks = self._builder.action_masks(self.protocol, self._passed)
+        self._allowed = self._masks.tolist()
         handed = self._masks.copy()             # the caller's masks: editing one leaves the env's checks alone
         return {a: {"observation": obs[self.agent_index[a]], "action_mask": handed[self.agent_index[a]]}
                 for a in self.agents}

@@ -195,7 +195,7 @@ class ObservationBuilder:
             np.copyto(self._tasks, self._static_tasks)
         task_features(self._tasks, self._kernel_columns, self.scales.reward_unit, view.gain, view.can_bid,
                       view.outbid, view.members, s.task_agents, view.lowest_bid, view.group_total, view.displaced_bid,
-                      view.in_bundle, kn.own_bids(), kn.quit, protocol.quit_options(), protocol.round,
+                      view.in_bundle, kn.groups.own, kn.quit, protocol.quit_options(), protocol.round,
                       kn.assigned_at, view.prereqs_met)
         return self._finish(protocol, passed, dtype)
 
@@ -242,7 +242,7 @@ class ObservationBuilder:
             f[:, :, col("released")] = protocol.released
             f[:, ~protocol.released, :] = 0.0
         own = self._buffer
-        own[:, 4] = [len(b) / s.n_tasks for b in kn.bundles]
+        own[:, 4] = np.fromiter(map(len, kn.bundles), dtype=float, count=s.n_agents) / s.n_tasks
         own[:, 5] = min(protocol.round / protocol.max_rounds, 1.0)
         own[:, 6] = passed
         return self._buffer.astype(dtype)

@@ -17,6 +17,7 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.policies import ActorCriticPolicy
 
+from policies.base import stack_observations
 from policies.registry import make_policy
 from policies.teams import ScriptedTeammates, check_scripted_agents
 from taskalloc_env.env import TaskAllocEnv
@@ -54,8 +55,9 @@ def collect_demonstrations(env_kwargs: Mapping[str, Any], n_episodes: int, seed_
         episode_obs, episode_masks, episode_actions, rewards = [], [], [], []
         while env.agents:
             actions = expert_policy.act({a: observations[a] for a in learned}, infos)
-            episode_obs.append(np.stack([observations[a]["observation"] for a in learned]))
-            episode_masks.append(np.stack([observations[a]["action_mask"] for a in learned]))
+            obs, masks = stack_observations(observations, learned)
+            episode_obs.append(obs)
+            episode_masks.append(masks)
             episode_actions.append(np.array([actions[a] for a in learned]))
             if teammates is not None:
                 actions.update(teammates.act({a: observations[a] for a in scripted}, infos))

@@ -37,6 +37,7 @@ from torch import nn
 from evaluation.episodes import evaluate
 from evaluation.seeds import DEMO_SEED_START, VALIDATION_SEED_START
 from policies import checkpoint, make_policy
+from policies.base import stack_observations
 from policies.learned import LearnedPolicy
 from policies.oracle import OraclePolicy
 from taskalloc_env.config import resolve_config
@@ -114,8 +115,8 @@ def play(env: TaskAllocEnv, oracle: OraclePolicy, actor: nn.Module, seeds: Seque
         observations, _ = env.reset(seed=int(seed))
         oracle.start(env, int(seed))
         while env.agents:
-            obs = np.stack([observations[a]["observation"] for a in agents])
-            masks = np.stack([observations[a]["action_mask"] for a in agents]).astype(bool)
+            obs, masks = stack_observations(observations, agents)
+            masks = masks.astype(bool)
             decide = masks.sum(axis=1) > 1
             rows.append(Decisions(obs[decide], masks[decide], oracle.targets(agents, masks)[decide],
                                   obs[decide, round_column] == 0))

@@ -48,6 +48,7 @@ from torch import nn
 from evaluation.episodes import evaluate, summarise
 from evaluation.seeds import TEST_SEEDS, VALIDATION_SEED_START
 from policies import checkpoint, make_policy
+from policies.base import stack_observations
 from policies.learned import LearnedPolicy, resolve
 from policies.networks import AttentionActor, PoolingActor, count_parameters
 from taskalloc_env.config import resolve_config
@@ -180,8 +181,7 @@ class Group:
         self.obs, self.masks, self.states = (np.stack(x) for x in zip(*rows))
 
     def _observe(self, env: TaskAllocEnv, obs: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return (np.stack([obs[a]["observation"] for a in self.agents]),
-                np.stack([obs[a]["action_mask"] for a in self.agents]), env.state())
+        return (*stack_observations(obs, self.agents), env.state())
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[np.ndarray | None]]:
         """Step every copy; (rewards (C,), episode ends (C,), the last state of each copy cut by max_cycles)."""

@@ -34,6 +34,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 from stable_baselines3.common.vec_env.base_vec_env import CloudpickleWrapper, VecEnv, VecEnvIndices
 
+from policies.base import stack_observations
 from policies.teams import ScriptedTeammates, check_scripted_agents
 
 EnvFn = Callable[[], ParallelEnv]
@@ -98,7 +99,8 @@ class EnvCopy:
         return new_obs, reward, np.ones(len(self.learned), dtype=bool), slot_infos
 
     def _stack(self, obs: Mapping[str, Mapping[str, np.ndarray]]) -> dict[str, np.ndarray]:
-        return {key: np.stack([obs[a][key] for a in self.learned]) for key in ("observation", "action_mask")}
+        observations, masks = stack_observations(obs, self.learned)
+        return {"observation": observations, "action_mask": masks}
 
     def get_attr(self, name: str) -> Any:
         return getattr(self.env, name)

@@ -148,17 +148,6 @@ def _insert(count: int, ids: np.ndarray, values: np.ndarray, agent: int, value: 
 
 
 @jit
-def _column_hash(count: int, ids: np.ndarray, values: np.ndarray) -> np.int64:
-    """A 64-bit fingerprint of a member list (ids and the exact bits of the bids)."""
-    h = np.uint64(count) * np.uint64(0x9E3779B97F4A7C15)
-    bits = values.view(np.uint64)
-    for c in range(count):
-        h = (h ^ np.uint64(ids[c])) * np.uint64(0x100000001B3)
-        h = (h ^ bits[c]) * np.uint64(0x100000001B3)
-    return np.int64(h >> np.uint64(1))
-
-
-@jit
 def _same_members(count_a: int, ids_a: np.ndarray, values_a: np.ndarray, count_b: int, ids_b: np.ndarray,
                   values_b: np.ndarray) -> bool:
     if count_a != count_b:
@@ -167,54 +156,6 @@ def _same_members(count_a: int, ids_a: np.ndarray, values_a: np.ndarray, count_b
         if ids_a[c] != ids_b[c] or values_a[c] != values_b[c]:
             return False
     return True
-
-
-@jit
-def _intern_sent(count: np.ndarray, ids: np.ndarray, values: np.ndarray, single: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Number the distinct multi-agent columns of the sent tables: (H, M) content ids (equal ids ⇔ equal columns)
-    and an open-addressing table (fingerprint → representative column) to look receivers' columns up in."""
-    h, m = count.shape
-    size = 1
-    while size < 4 * h * m:
-        size *= 2
-    keys = np.full(size, -1, dtype=np.int64)
-    owner = np.zeros(size, dtype=np.int64)                      # t * m + j of the representative
-    content = np.full((h, m), -1, dtype=np.int64)
-    for t in range(h):
-        for j in range(m):
-            if single[j]:
-                continue
-            key = _column_hash(count[t, j], ids[t, j], values[t, j])
-            slot = key & (size - 1)
-            while True:
-                if keys[slot] == -1:                            # a new content: this column represents it
-                    keys[slot], owner[slot] = key, t * m + j
-                    content[t, j] = t * m + j
-                    break
-                r_t, r_j = owner[slot] // m, owner[slot] % m
-                if keys[slot] == key and _same_members(count[t, j], ids[t, j], values[t, j], count[r_t, r_j],
-                                                       ids[r_t, r_j], values[r_t, r_j]):
-                    content[t, j] = owner[slot]
-                    break
-                slot = (slot + 1) & (size - 1)
-    return content, keys, owner
-
-
-@jit
-def _lookup(count: int, ids: np.ndarray, values: np.ndarray, keys: np.ndarray, owner: np.ndarray, m: int,
-            sent_count: np.ndarray, sent_ids: np.ndarray, sent_values: np.ndarray) -> np.int64:
-    """The content id of a receiver's column if some sent column holds exactly the same members, else −1."""
-    key = _column_hash(count, ids, values)
-    size = keys.size
-    slot = key & (size - 1)
-    while keys[slot] != -1:
-        r_t, r_j = owner[slot] // m, owner[slot] % m
-        if keys[slot] == key and _same_members(count, ids, values, sent_count[r_t, r_j], sent_ids[r_t, r_j],
-                                               sent_values[r_t, r_j]):
-            return owner[slot]
-        slot = (slot + 1) & (size - 1)
-    return np.int64(-1)
 
 
 @jit
@@ -292,14 +233,6 @@ def exchange_all(count: np.ndarray, ids: np.ndarray, values: np.ndarray, own: np
     sent_count = snap_count.reshape(-1, m)
     sent_ids = snap_ids.reshape(-1, m, width)
     sent_values = snap_values.reshape(-1, m, width)
-    # equal columns share a content id, so an unchanged column costs one comparison per message
-    sent_content, keys, owner = _intern_sent(sent_count, sent_ids, sent_values, single)
-    content = np.full((n, m), -1, dtype=np.int64)
-    for i in range(n):
-        for j in range(m):
-            if not single[j]:
-                content[i, j] = _lookup(count[i, j], ids[i, j], values[i, j], keys, owner, m, sent_count, sent_ids,
-                                        sent_values)
     own_count, own_tasks = _own_tasks(sent_count, sent_ids, single, n)
     before_ids = np.empty(width, dtype=np.int64)
     before_values = np.empty(width)
@@ -335,9 +268,9 @@ def exchange_all(count: np.ndarray, ids: np.ndarray, values: np.ndarray, own: np
                 own[i, j] = new_y if new_z == i else 0.0
                 changed = True
                 continue
-            if content[i, j] >= 0 and content[i, j] == sent_content[t, j]:
-                continue                    # an identical column: neither pass changes anything
             c_i, c_k = count[i, j], sent_count[t, j]
+            if _same_members(c_i, ids[i, j], values[i, j], c_k, sent_ids[t, j], sent_values[t, j]):
+                continue                    # an identical column: neither pass changes anything
             if not (_any_trusted(c_i, ids[i, j], i, k, s_i, s_k) or _any_trusted(c_k, sent_ids[t, j], i, k, s_i, s_k)):
                 continue                    # both passes act on trusted members only: nothing can change
             for c in range(c_i):
@@ -352,8 +285,6 @@ def exchange_all(count: np.ndarray, ids: np.ndarray, values: np.ndarray, own: np
                 same = same and ids[i, j, c] == before_ids[c] and values[i, j, c] == before_values[c]
             if not same:
                 own[i, j] = _value_of(i, c_new, ids[i, j], values[i, j])
-                content[i, j] = _lookup(c_new, ids[i, j], values[i, j], keys, owner, m, sent_count, sent_ids,
-                                        sent_values)
                 changed = True
         stamps[i, k] = now
         for a in range(n):
