@@ -21,6 +21,9 @@ import dataclasses
 
 import numpy as np
 
+from taskalloc_env import kernels
+from taskalloc_env.kernels.table import FULL, set_member
+
 EMPTY = -1                      # an empty member slot (equal to ``cbba_table.NONE``: slot 0 is the winner)
 
 
@@ -123,7 +126,15 @@ class GroupTable:
 
     # -- writes ------------------------------------------------------------------------------------------------
     def set(self, i: int, k: int, j: int, value: float) -> None:
-        """X_i[k][j] = value: k joins (or re-bids in) j's group if value > 0, leaves it otherwise."""
+        """X_i[k][j] = value: k joins (or re-bids in) j's group if value > 0, leaves it otherwise; compiled
+        (``kernels.table.set_member``) when numba is there, else ``set_reference``."""
+        if not kernels.COMPILED:
+            self.set_reference(i, k, j, value)
+        elif set_member(self.members, self.bids, self.count, self.own, self.capacity, i, k, j, float(value)) == FULL:
+            raise self._overflow(i, k, j, int(self.count[i, j]))
+
+    def set_reference(self, i: int, k: int, j: int, value: float) -> None:
+        """``set`` in Python (the reference of ``kernels.table.set_member``)."""
         n = int(self.count[i, j])
         if self.capacity[j] == 1:           # a single-agent column: slot 0 only, no order to keep
             present = n == 1 and self.members[i, j, 0] == k

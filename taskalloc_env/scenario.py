@@ -91,7 +91,7 @@ class Scenario:
         finite = {"agent_pos": self.agent_pos, "agent_speed": self.agent_speed, "task_pos": self.task_pos,
                   "task_reward": self.task_reward, "task_start": self.task_start, "task_duration": self.task_duration}
         for name, array in finite.items():
-            bad = ~np.isfinite(array) | (np.abs(np.nan_to_num(array)) > MAX_MAGNITUDE)
+            bad = ~(np.abs(array) <= MAX_MAGNITUDE)         # NaN and ±inf compare False
             if bad.any():
                 raise ValueError(f"scenario array {name} holds {array[bad].tolist()[:3]}: every value must be a finite "
                                  f"number within ±{MAX_MAGNITUDE:g}")
@@ -126,9 +126,10 @@ class Scenario:
                              "of docs/algorithm.md depend on the order members join)")
         if np.any(np.diag(self.task_prereqs)):
             raise ValueError("a task cannot be its own prerequisite (j ∉ P_j, thesis §3.1.3)")
-        if _has_cycle(self.task_prereqs):
+        if self.task_prereqs.any() and _has_cycle(self.task_prereqs):
             raise ValueError("prerequisites contain a cycle; no task of the cycle could ever be done")
-        for array in dataclasses.astuple(self):
+        for field in dataclasses.fields(self):       # not dataclasses.astuple: it would freeze deep copies
+            array = getattr(self, field.name)
             if isinstance(array, np.ndarray):
                 array.setflags(write=False)
 

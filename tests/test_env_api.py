@@ -8,6 +8,7 @@ compares whole episodes.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import types
 import warnings
@@ -404,3 +405,17 @@ def test_the_aec_view_refuses_a_bad_action_when_it_is_given():
     lenient.reset(seed=0)
     lenient.step(1 + 4)                        # noop: accepted now, turned into a flagged pass with the turn
     assert lenient.agent_selection != first
+
+
+def test_the_scenario_arrays_are_read_only():
+    """The instance the protocol plans on cannot be edited in place through ``env.scenario`` (a replaced scenario
+    is a new, checked one); every array field refuses a write."""
+    env = TaskAllocEnv("default")
+    env.reset(seed=0)
+    scenario = env.unwrapped.scenario
+    arrays = {f.name: getattr(scenario, f.name) for f in dataclasses.fields(scenario)
+              if isinstance(getattr(scenario, f.name), np.ndarray)}
+    assert {"agent_pos", "task_reward", "task_prereqs"} <= set(arrays)
+    for array in arrays.values():
+        with pytest.raises(ValueError, match="read-only"):
+            array[...] = array

@@ -13,6 +13,7 @@ from taskalloc_env import kernels
 from taskalloc_env.bidding import bid_view, refresh_rows
 from taskalloc_env.config import PrerequisiteChains, TaskAllocConfig
 from taskalloc_env.consensus import Snapshot, exchange, exchange_reference
+from taskalloc_env.group_table import GroupOverflow, GroupTable
 from taskalloc_env.groups import Equipment
 from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.network import Deliveries
@@ -83,6 +84,28 @@ def test_compiled_exchange_equals_the_reference(case):
         np.testing.assert_array_equal(getattr(compiled.groups, name), getattr(reference.groups, name), err_msg=name)
     for name in ("winner", "timestamps", "known"):
         np.testing.assert_array_equal(getattr(compiled, name), getattr(reference, name), err_msg=name)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(1, 5), st.lists(st.integers(1, 4), min_size=1, max_size=5), st.integers(0, 2**32 - 1))
+def test_compiled_group_writes_equal_the_reference(n, capacity, seed):
+    """Random joins, re-bids and withdrawals (some of them beyond L_j) on two tables, one written by
+    ``kernels.table.set_member`` and one by ``GroupTable.set_reference``: the same arrays and the same refusals."""
+    rng = np.random.default_rng(seed)
+    compiled, reference = (GroupTable.empty(n, n, np.array(capacity)) for _ in range(2))
+    for _ in range(60):
+        i, k, j = int(rng.integers(n)), int(rng.integers(n)), int(rng.integers(len(capacity)))
+        value = float(rng.choice([0.0, -1.0, rng.uniform(1, 9)]))
+        outcomes = []
+        for write in (compiled.set, reference.set_reference):
+            try:
+                write(i, k, j, value)
+                outcomes.append(None)
+            except GroupOverflow as error:
+                outcomes.append(str(error))
+        assert outcomes[0] == outcomes[1]
+        for name in ("count", "members", "bids", "own"):
+            np.testing.assert_array_equal(getattr(compiled, name), getattr(reference, name), err_msg=name)
 
 
 @st.composite

@@ -43,8 +43,9 @@ def test_the_critic_sees_the_state_and_the_actor_does_not():
     env = TaskAllocEnv(**ENV)
     obs, _ = env.reset(seed=3)
     scenario = env.unwrapped.scenario
-    moved = dataclasses.replace(scenario, agent_pos=scenario.agent_pos.copy())
-    moved.agent_pos[1, :2] = scenario.arena[0] - moved.agent_pos[1, :2]
+    positions = scenario.agent_pos.copy()
+    positions[1, :2] = scenario.arena[0] - positions[1, :2]
+    moved = dataclasses.replace(scenario, agent_pos=positions)
     other = TaskAllocEnv(scenario=moved, task_quitting=True, delta=1)
     obs_moved, _ = other.reset(seed=3)
     np.testing.assert_array_equal(obs["uav_0"]["observation"], obs_moved["uav_0"]["observation"])

@@ -5,6 +5,7 @@
 * ``bids.bid_rows``: the bid view's rows, eligibility and the outbid test (``bidding.bid_view``);
 * ``score.paid_groups``: who is paid in a team score (``scoring.paid_groups_reference``);
 * ``observe.task_features``: the per-step task columns of the observations (``ObservationBuilder.build_reference``).
+* ``table.set_member``: one write X_i[k][j] to the group table (``GroupTable.set_reference``).
 
 Without numba, or with the environment variable ``TASKALLOC_KERNELS=reference``, ``COMPILED`` is false and the
 numpy references run instead (the same allocations; observations may differ in the last bit of an ``exp``, see
