@@ -239,15 +239,16 @@ class TaskAllocEnv(ParallelEnv):
             self._steps >= self.max_cycles or protocol.round >= protocol.max_rounds)
         agents = list(self.agents)
         observations = self._observations()
-        rewards = {a: reward for a in agents}
-        terminations = {a: terminated or not protocol.alive[self.agent_index[a]] for a in agents}
-        truncations = {a: truncated for a in agents}
+        alive, index = protocol.alive.tolist(), self.agent_index
+        rewards = dict.fromkeys(agents, reward)
+        terminations = {a: terminated or not alive[index[a]] for a in agents}
+        truncations = dict.fromkeys(agents, truncated)
         infos = self._infos(flags)
         if terminated or truncated:
             self._done = True
             self.agents = []
         else:                                                   # failed agents leave (PettingZoo: terminated)
-            self.agents = [a for a in agents if protocol.alive[self.agent_index[a]]]
+            self.agents = [a for a in agents if alive[index[a]]]
         # human mode redraws its window every step (Gymnasium's convention); saving a file every step would cost a
         # figure per step, so with render_path the file is written at the end of the episode and on render() calls
         if self.render_mode == "human" and (self.render_path is None or not self.agents):
@@ -341,8 +342,8 @@ class TaskAllocEnv(ParallelEnv):
         self._masks = self._builder.action_masks(self.protocol, self._passed)
         self._allowed = self._masks.tolist()
         handed = self._masks.copy()             # the caller's masks: editing one leaves the env's checks alone
-        return {a: {"observation": obs[self.agent_index[a]], "action_mask": handed[self.agent_index[a]]}
-                for a in self.agents}
+        index = self.agent_index
+        return {a: {"observation": obs[index[a]], "action_mask": handed[index[a]]} for a in self.agents}
 
     def _infos(self, flags: dict[str, str]) -> dict[str, dict[str, Any]]:
         p = self.protocol
@@ -353,16 +354,17 @@ class TaskAllocEnv(ParallelEnv):
         asynchronous = self.config.asynchronous
         if asynchronous:                                 # Johnson §4.1.3: each agent declares its own convergence
             declared, declared_at = p.agents_locally_converged, p.local_ticks
+        passed = self._passed.tolist()
         infos = {}
         for a in self.agents:
-            info = dict(figures)
-            info["passed"] = bool(self._passed[self.agent_index[a]])
+            i = self.agent_index[a]
+            info = dict(figures, passed=passed[i])
             if asynchronous:
-                info["locally_converged"] = bool(declared[self.agent_index[a]])
-                info["locally_converged_at"] = int(declared_at[self.agent_index[a]])
+                info["locally_converged"] = bool(declared[i])
+                info["locally_converged_at"] = int(declared_at[i])
             info["invalid_action"] = a in flags          # the reason: env.unwrapped.invalid_action_reasons[a]
             if self.mask_in_infos:
-                info["action_mask"] = self._masks[self.agent_index[a]].copy()
+                info["action_mask"] = self._masks[i].copy()
             infos[a] = info
         return infos
 

@@ -158,6 +158,7 @@ class ObservationBuilder:
         self._buffer = self._static_features(protocol)
         self._columns = {name: c for c, name in enumerate(self.layout.task_names)}
         self._kernel_columns = np.array([self._columns[name] for name in KERNEL_COLUMNS], dtype=np.int64)
+        self._silence, self._popups = "member_silence" in self._columns, "released" in self._columns
         self._tasks = self._buffer[:, self.layout.own_size:].reshape(s.n_agents, s.n_tasks, self.layout.task_size)
         # with pop-up tasks a hidden task's block is zeroed, its fixed columns too: kept to restore on release
         self._static_tasks = self._tasks.copy() if protocol.cfg.popup_tasks else None
@@ -232,13 +233,13 @@ class ObservationBuilder:
         kn = protocol.knowledge
         col = self._columns.__getitem__
         f = self._tasks
-        if "member_silence" in self.layout.task_names:
+        if self._silence:
             silence = (protocol.round - kn.timestamps) / protocol.silence_timeout               # (N, N)
             np.fill_diagonal(silence, 0.0)
             ids = kn.groups.members                                                             # (N, M, W)
             quiet = np.where(ids >= 0, silence[np.arange(len(ids))[:, None, None], np.maximum(ids, 0)], 0.0)
             f[:, :, col("member_silence")] = np.minimum(quiet.max(axis=2), 1.0)
-        if "released" in self.layout.task_names:                # a task not yet released: its whole block is zero
+        if self._popups:                                        # a task not yet released: its whole block is zero
             f[:, :, col("released")] = protocol.released
             f[:, ~protocol.released, :] = 0.0
         own = self._buffer
