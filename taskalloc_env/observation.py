@@ -14,6 +14,7 @@ default environment (and the models trained on it) keep their size: ``member_sil
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 from gymnasium import spaces
@@ -97,19 +98,20 @@ class ObservationLayout:
     n_equipment: int
     task_names: tuple[str, ...] = TASK_FEATURES
 
-    @property
+    # derived once per layout (read at every step by the policies; a frozen dataclass keeps them in its __dict__)
+    @functools.cached_property
     def own_names(self) -> tuple[str, ...]:
         return OWN_FEATURES + tuple(f"equipment_{e}" for e in range(self.n_equipment))
 
-    @property
+    @functools.cached_property
     def own_size(self) -> int:
         return len(self.own_names)
 
-    @property
+    @functools.cached_property
     def task_size(self) -> int:
         return len(self.task_names)
 
-    @property
+    @functools.cached_property
     def size(self) -> int:
         return self.own_size + self.n_tasks * self.task_size
 

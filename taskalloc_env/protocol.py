@@ -208,8 +208,11 @@ class Protocol:
         """
         kn = self.knowledge
         counts = self.view().members if counts is None else counts
-        return (~kn.single[None, :] & (kn.groups.own > 0) & ~kn.quit
-                & (counts < self.scenario.task_agents[None, :]))
+        quittable = counts < self.scenario.task_agents               # a new (N, M) array, then narrowed in place
+        quittable &= kn.groups.own > 0
+        quittable &= ~kn.quit
+        quittable &= ~kn.single
+        return quittable
 
     def quit_options(self) -> np.ndarray:
         """(N, M) quits the protocol allows now: quittable and the timer ran out, T − H_i[j] > δ (thesis Alg 9 l. 6,
