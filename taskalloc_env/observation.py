@@ -155,7 +155,7 @@ class ObservationBuilder:
         names = (TASK_FEATURES + (FAULT_FEATURES if protocol.cfg.faulty else ())
                  + (POPUP_FEATURES if protocol.cfg.popup_tasks else ()))
         self.layout = ObservationLayout(s.n_tasks, len(s.equipment_names), names)
-        self.low, self.high = self.layout.bounds(max_agents_per_task, max_rounds, s.n_agents)
+        self._bounds = (max_agents_per_task, max_rounds, s.n_agents)
         self.scales = Scales.of(s)
         self._buffer = self._static_features(protocol)
         self._columns = {name: c for c, name in enumerate(self.layout.task_names)}
@@ -166,7 +166,9 @@ class ObservationBuilder:
         self._static_tasks = self._tasks.copy() if protocol.cfg.popup_tasks else None
 
     def space(self, dtype: np.dtype) -> spaces.Box:
-        return spaces.Box(self.low.astype(dtype), self.high.astype(dtype), dtype=dtype)
+        """The observation space (built once per env; its bounds are not recomputed at every reset)."""
+        low, high = self.layout.bounds(*self._bounds)
+        return spaces.Box(low.astype(dtype), high.astype(dtype), dtype=dtype)
 
     def _static_features(self, protocol: Protocol) -> np.ndarray:
         """(N, D) observations with the columns that never change filled in (the rest is written by ``build``)."""
