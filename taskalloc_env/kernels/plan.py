@@ -27,6 +27,14 @@ def _lateness(arrival: float, start: float, task_start: float, arrival_time: boo
 
 
 @jit
+def _discounted(pay: float, lam: float, lateness: float) -> float:
+    """pay · e^{−λ·lateness} of (3.8); on time (lateness 0) that is pay itself, exactly, without the exponential."""
+    if lateness == 0.0:
+        return pay
+    return pay * np.exp(-lam * lateness)
+
+
+@jit
 def _on_path(path: np.ndarray, length: int, j: int) -> bool:
     for r in range(length):  # noqa: SIM110 - compiled: an explicit loop, not a generator
         if path[r] == j:
@@ -77,7 +85,7 @@ def plan_paths(flat: np.ndarray, lengths: np.ndarray, agents: np.ndarray, speed:
             arrival[a, r] = t + leg[r] / speed[agent]
             start[a, r] = max(arrival[a, r], earliest[j])
             finish[a, r] = start[a, r] + duration[j]
-            reward[a, r] = pay[j] * np.exp(-lam * _lateness(arrival[a, r], start[a, r], task_start[j], arrival_time))
+            reward[a, r] = _discounted(pay[j], lam, _lateness(arrival[a, r], start[a, r], task_start[j], arrival_time))
             cost[a, r] = gamma * (leg[r] if leg_cost else from_start[agent, j])
             if not (arrival[a, r] < deadline[j] and doable[j]):
                 ok_path = False
@@ -110,7 +118,7 @@ def plan_paths(flat: np.ndarray, lengths: np.ndarray, agents: np.ndarray, speed:
                     charge = gamma * from_start[agent, j]
                 if capped and not pay[j] - charge > max(best, 0.0):
                     continue                                     # not even the undiscounted reward would win
-                value = pay[j] * np.exp(-lam * _lateness(arrive, begin, task_start[j], arrival_time))
+                value = _discounted(pay[j], lam, _lateness(arrive, begin, task_start[j], arrival_time))
                 value -= charge
                 if not value > 0:                                # later tasks can only lose
                     continue
