@@ -107,10 +107,7 @@ class GroupTable:
 
     def changed(self, before: GroupTable) -> np.ndarray:
         """(N, M) column j of i's table differs from ``before``'s (a member or a bid)."""
-        out = np.zeros(self.count.shape, dtype=bool)
-        for s in range(self.members.shape[2]):
-            out |= (self.members[:, :, s] != before.members[:, :, s]) | (self.bids[:, :, s] != before.bids[:, :, s])
-        return out
+        return ((self.members != before.members) | (self.bids != before.bids)).any(axis=2)
 
     def dense(self, i: int) -> np.ndarray:
         """(N, M) holder i's matrix X_i[k][j] (tests and debugging)."""

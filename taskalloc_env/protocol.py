@@ -304,10 +304,11 @@ class Protocol:
         c.conflicting_bids += int((own_before & (kn.groups.own <= 0) & self.alive[:, None]).sum())
         self._release_outbid()
         counts = kn.member_counts() if self.cfg.task_quitting else None
+        joined = kn.groups.joined(before) if before is not None else None      # for the timers and the quit blocks
         if before is not None and self.cfg.task_quitting:
-            self._reset_quit_timers(before, counts)
+            self._reset_quit_timers(before, counts, joined)
         if before is not None and kn.quit_blocked.any():  # another agent joined a quit task: the quitter may return
-            kn.quit_blocked &= ~kn.groups.joined(before)
+            kn.quit_blocked &= ~joined
         c.rounds = self.round
         c.messages += traffic.messages
         c.informative_messages += traffic.informative
@@ -416,12 +417,14 @@ class Protocol:
             kn.release(i, next(j for j in sequence if row[j] <= 0), self.cfg.release_order)
             self._dirty.add(i)
 
-    def _reset_quit_timers(self, before: GroupTable, counts: np.ndarray | None = None) -> None:
+    def _reset_quit_timers(self, before: GroupTable, counts: np.ndarray | None = None,
+                           joined: np.ndarray | None = None) -> None:
         """H_i[j] = T when column j of an incomplete held group changed (Alg 9 lines 4–5, ``reset_on``); ``before``
-        are the groups before the exchange, ``counts`` the tables' member counts after it."""
+        are the groups before the exchange, ``counts`` the tables' member counts after it, ``joined`` the columns a
+        member joined since ``before`` if the caller has them already."""
         kn = self.knowledge
         if self.cfg.reset_on == "additions":
-            updated = kn.groups.joined(before)
+            updated = joined if joined is not None else kn.groups.joined(before)
         else:
             updated = kn.groups.changed(before)
         kn.assigned_at[updated & self._quittable(counts)] = self.round
