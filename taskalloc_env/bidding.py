@@ -202,9 +202,10 @@ def refresh_rows(previous: BidView | None, rows: Sequence[int], knowledge: Local
     capacity = (known_capacity(knowledge, scenario, equipment, equipment_match) if require_known_capacity
                 else _everyone_known(n, m))
     groups = knowledge.groups
+    task_agents = np.asarray(scenario.task_agents, dtype=np.int64)          # no copy when it is int64 already
     bid_rows(np.asarray(rows, dtype=np.int64), groups.count, groups.members, groups.bids, knowledge.single, gain,
              knowledge.quit_blocked, np.fromiter(map(len, knowledge.bundles), dtype=np.int64, count=n),
-             equipment_match, fillable, capacity, scenario.task_agents.astype(np.int64), equipment.restricted,
+             equipment_match, fillable, capacity, task_agents, equipment.restricted,
              equipment.required, equipment.agent, scenario.task_prereqs, PREREQ_MODES[prereq_mode], int(max_bundle),
              bid_warping, outbid_ties == "strict", *arrays)
     if reuse:                       # the same arrays, rewritten: only the derived valid-bid mask is stale
