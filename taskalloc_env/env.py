@@ -348,7 +348,8 @@ class TaskAllocEnv(ParallelEnv):
     def _infos(self, flags: dict[str, str]) -> dict[str, dict[str, Any]]:
         p = self.protocol
         ts = p.score()
-        figures = {"score": ts.score, "valid_tasks": int(ts.valid.sum()), "conflicts": int(ts.conflicts.sum()),
+        figures = {"score": ts.score, "valid_tasks": int(np.count_nonzero(ts.valid)),
+                   "conflicts": int(np.count_nonzero(ts.conflicts)),
                    "round": p.round, "messages": p.counters.messages, "data_items": p.counters.data_items,
                    "converged": p.converged}
         asynchronous = self.config.asynchronous

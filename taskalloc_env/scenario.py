@@ -12,6 +12,7 @@ empty multiset lets any agent bid (thesis §3.1.3).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import warnings
 from collections.abc import Sequence
@@ -146,11 +147,12 @@ class Scenario:
         """Tasks with L_j > 1."""
         return self.task_agents > 1
 
-    @property
+    # read-only arrays (``__post_init__``): what is derived from them is computed once (kept in __dict__)
+    @functools.cached_property
     def has_equipment(self) -> bool:
         return bool(self.task_equipment.any())
 
-    @property
+    @functools.cached_property
     def has_prerequisites(self) -> bool:
         return bool(self.task_prereqs.any())
 
