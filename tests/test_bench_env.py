@@ -40,3 +40,31 @@ def test_bad_flags_are_one_line_and_exit_2(args, capsys):
     assert run_cli(lambda: main(args)) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and err.count("\n") == 1
+
+
+def test_episode_digests_repeat_and_see_a_changed_value(capsys, monkeypatch):
+    """The same draw prints the same lines; an episode whose rewards change by one part in 10^12 prints another."""
+    from benchmarks import episode_digests
+
+    assert episode_digests.main(["--episodes", "6"]) == 0
+    first = capsys.readouterr().out.splitlines()
+    assert episode_digests.main(["--episodes", "6"]) == 0
+    assert capsys.readouterr().out.splitlines() == first and len(first) == 6
+    step = episode_digests.TaskAllocEnv.step
+
+    def nudged(self, actions):
+        out = step(self, actions)
+        return out[0], {a: r * (1 + 1e-12) for a, r in out[1].items()}, *out[2:]
+    monkeypatch.setattr(episode_digests.TaskAllocEnv, "step", nudged)
+    assert episode_digests.main(["--episodes", "6"]) == 0
+    changed = capsys.readouterr().out.splitlines()
+    assert [line.split()[2] for line in changed] != [line.split()[2] for line in first]
+    assert [line.split()[3] for line in changed] == [line.split()[3] for line in first]   # allocations unchanged
+
+
+def test_episode_digests_refuse_bad_flags(capsys):
+    from benchmarks import episode_digests
+
+    assert run_cli(lambda: episode_digests.main(["--episodes", "0"])) == 2
+    assert run_cli(lambda: episode_digests.main(["--policies", "nope"])) == 2
+    assert capsys.readouterr().err.count("\n") == 2
