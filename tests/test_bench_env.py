@@ -35,7 +35,7 @@ def test_exponents_are_recovered_and_need_independent_sizes():
 
 
 @pytest.mark.parametrize("args", [["--max-size", "big"], ["--only", "nothing"], ["--solvers", "sgama"],
-                                  ["--runs", "0"], ["--seeds", "x"]])
+                                  ["--runs", "0"], ["--seeds", "x"], ["--repeats", "0"]])
 def test_bad_flags_are_one_line_and_exit_2(args, capsys):
     assert run_cli(lambda: main(args)) == 2
     err = capsys.readouterr().err
