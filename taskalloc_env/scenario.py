@@ -51,7 +51,11 @@ class Task:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Scenario:
-    """Arrays of agent and task attributes. Shapes: N agents, M tasks, E equipment items."""
+    """Arrays of agent and task attributes. Shapes: N agents, M tasks, E equipment items.
+
+    Checked on construction and read-only afterwards (the protocol plans on it): a changed instance is a new one,
+    ``dataclasses.replace(scenario, agent_pos=moved)``, checked again.
+    """
 
     agent_pos: np.ndarray          # (N, 3)
     agent_speed: np.ndarray        # (N,)
