@@ -35,7 +35,7 @@ import numpy as np
 from taskalloc_env import kernels
 from taskalloc_env.config import TaskAllocConfig
 from taskalloc_env.groups import Equipment
-from taskalloc_env.kernels.plan import plan_paths, set_table_rows
+from taskalloc_env.kernels.plan import plan_paths, retime_rows
 from taskalloc_env.kernels.score import paid_groups
 from taskalloc_env.scenario import Scenario
 
@@ -87,6 +87,10 @@ class ScoringModel:
         self.equipment = Equipment(s.agent_equipment, s.task_equipment)
         for array in (self.dist_agent_task, self.dist_task_task, self.pay, self.ready, self.earliest, self.doable):
             array.setflags(write=False)
+        # the plan kernels' inputs after the paths, in their order (fixed for the model's life)
+        self._kernel_inputs = (self.speed, self.dist_agent_task, self.dist_task_task, self.earliest, self.deadline,
+                               self.doable, s.task_duration, s.task_start, self.pay, self.lam, self.gamma,
+                               distance_cost == "leg", reward_time == "arrival", marginal_gain == "frozen")
 
     def _prerequisite_ready(self, prereq_timing: str) -> np.ndarray:
         """ready_j: the earliest time a follow-up may start under ``prereq_timing`` (our choice, see above)."""
@@ -139,22 +143,16 @@ class ScoringModel:
             table.set_rows(agents, plan.timing)
             gain[agents], slot[agents] = plan.gain, plan.slot
             return
-        timing = self._compiled_plan(agents, paths, True, agents, gain, slot)
-        set_table_rows(agents, timing.path, timing.length, timing.reward, timing.start, table.members, table.reward,
-                       table.start)
-        table.cost[agents] = timing.cost.sum(axis=1)      # numpy's summation order, as set_rows sums
+        cost = retime_rows(*_concatenated(paths), agents, *self._kernel_inputs, gain, slot, table.members,
+                           table.reward, table.start)
+        table.cost[agents] = cost.sum(axis=1)             # numpy's summation order, as set_rows sums
 
     def _compiled_plan(self, agents: Sequence[int], paths: Sequence[Sequence[int]], gains: bool, rows: np.ndarray,
                        gain: np.ndarray, slot: np.ndarray) -> Timing:
         """``kernels.plan.plan_paths`` on padded paths: the timing, with c_ij and n_ij written to ``rows``."""
-        s = self.scenario
-        lengths = np.fromiter(map(len, paths), dtype=np.int64, count=len(paths))
-        flat = np.fromiter(itertools.chain.from_iterable(paths), dtype=np.int64, count=int(lengths.sum()))
-        padded, *timing = plan_paths(
-            flat, lengths, np.asarray(agents, dtype=np.int64), self.speed, self.dist_agent_task, self.dist_task_task,
-            self.earliest, self.deadline, self.doable, s.task_duration, s.task_start, self.pay, self.lam, self.gamma,
-            self.distance_cost == "leg", self.reward_time == "arrival", self.marginal_gain == "frozen", gains, rows,
-            gain, slot)
+        flat, lengths = _concatenated(paths)
+        padded, *timing = plan_paths(flat, lengths, np.asarray(agents, dtype=np.int64), *self._kernel_inputs, gains,
+                                     rows, gain, slot)
         return Timing(padded, lengths, *timing)
 
     def plan_reference(self, agents: Sequence[int], paths: Sequence[Sequence[int]], gains: bool = True) -> Plan:
@@ -286,6 +284,13 @@ def distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     of length 3 (a quarter of a millisecond at 100 tasks, once per episode)."""
     dx, dy, dz = (np.subtract.outer(a[:, c], b[:, c]) for c in range(3))
     return np.sqrt((dx * dx + dy * dy) + dz * dz)
+
+
+def _concatenated(paths: Sequence[Sequence[int]]) -> tuple[np.ndarray, np.ndarray]:
+    """The paths one after another (the plan kernels' input) and their lengths."""
+    lengths = np.fromiter(map(len, paths), dtype=np.int64, count=len(paths))
+    flat = np.fromiter(itertools.chain.from_iterable(paths), dtype=np.int64, count=int(lengths.sum()))
+    return flat, lengths
 
 
 def _padded(paths: Sequence[Sequence[int]]) -> tuple[np.ndarray, np.ndarray]:

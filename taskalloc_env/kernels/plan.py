@@ -184,3 +184,19 @@ def set_table_rows(rows: np.ndarray, padded: np.ndarray, lengths: np.ndarray, re
             members[i, j] = True
             table_reward[i, j] = reward[a, r]
             table_start[i, j] = start[a, r]
+
+
+@jit
+def retime_rows(flat: np.ndarray, lengths: np.ndarray, agents: np.ndarray, speed: np.ndarray, from_start: np.ndarray,
+                dist: np.ndarray, earliest: np.ndarray, deadline: np.ndarray, doable: np.ndarray,
+                duration: np.ndarray, task_start: np.ndarray, pay: np.ndarray, lam: float, gamma: float,
+                leg_cost: bool, arrival_time: bool, frozen: bool, gain: np.ndarray, slot: np.ndarray,
+                members: np.ndarray, table_reward: np.ndarray, table_start: np.ndarray) -> np.ndarray:
+    """``plan_paths`` of ``agents`` with their gains written to rows ``agents`` of ``gain`` and ``slot``, and their
+    timed paths to those rows of the (N, M) path tables (``set_table_rows``), in one call; returns the (A, P) travel
+    costs, which the caller sums in numpy's order."""
+    padded, _, start, _, reward, cost, _ = plan_paths(flat, lengths, agents, speed, from_start, dist, earliest,
+                                                      deadline, doable, duration, task_start, pay, lam, gamma,
+                                                      leg_cost, arrival_time, frozen, True, agents, gain, slot)
+    set_table_rows(agents, padded, lengths, reward, start, members, table_reward, table_start)
+    return cost
