@@ -338,8 +338,7 @@ class TaskAllocEnv(ParallelEnv):
 
     # -- outputs ---------------------------------------------------------------------------------------------------
     def _observations(self) -> dict[str, dict[str, np.ndarray]]:
-        obs = self._builder.build(self.protocol, self._passed, self.dtype)
-        self._masks = self._builder.action_masks(self.protocol, self._passed)
+        obs, self._masks = self._builder.observe(self.protocol, self._passed, self.dtype)
         self._allowed = self._masks.tolist()
         handed = self._masks.copy()             # the caller's masks: editing one leaves the env's checks alone
         index = self.agent_index

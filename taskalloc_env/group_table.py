@@ -22,7 +22,7 @@ import dataclasses
 import numpy as np
 
 from taskalloc_env import kernels
-from taskalloc_env.kernels.table import FULL, set_member
+from taskalloc_env.kernels.table import FULL, joined_members, set_member
 
 EMPTY = -1                      # an empty member slot (equal to ``cbba_table.NONE``: slot 0 is the winner)
 
@@ -99,7 +99,14 @@ class GroupTable:
         return out
 
     def joined(self, before: GroupTable) -> np.ndarray:
-        """(N, M) a member of j's group in i's table that ``before`` did not list."""
+        """(N, M) a member of j's group in i's table that ``before`` did not list; compiled
+        (``kernels.table.joined_members``) when numba is there, else ``joined_reference``."""
+        if kernels.COMPILED:
+            return joined_members(self.members, before.members)
+        return self.joined_reference(before)
+
+    def joined_reference(self, before: GroupTable) -> np.ndarray:
+        """``joined`` in numpy (the reference of ``kernels.table.joined_members``)."""
         was = np.zeros(self.members.shape, dtype=bool)                                       # (N, M, W)
         for b in range(before.members.shape[2]):
             was |= self.members == before.members[:, :, b, None]

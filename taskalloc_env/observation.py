@@ -20,8 +20,8 @@ import numpy as np
 from gymnasium import spaces
 
 from taskalloc_env import kernels
+from taskalloc_env.kernels.observe import BUNDLE_SIZE, PASSED, ROUND, step_features
 from taskalloc_env.kernels.observe import COLUMNS as KERNEL_COLUMNS
-from taskalloc_env.kernels.observe import task_features
 from taskalloc_env.protocol import Protocol
 from taskalloc_env.scenario import Scenario
 
@@ -187,26 +187,30 @@ class ObservationBuilder:
         f[:, :, col("equipment_match")] = protocol.equipment_match
         return obs
 
-    def build(self, protocol: Protocol, passed: np.ndarray, dtype: np.dtype | type = np.float64) -> np.ndarray:
-        """(N, D) observations in ``dtype`` (a new array); row i uses only agent i's table, path and flags. The
-        per-step task columns are written by the compiled ``kernels.observe.task_features`` when numba is there,
-        else by ``build_reference``'s numpy lines (the same values, bit for bit)."""
+    def observe(self, protocol: Protocol, passed: np.ndarray, dtype: np.dtype | type = np.float64
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """(N, D) observations in ``dtype`` (a new array) and (N, 1 + 2M) int8 action masks; row i uses only agent
+        i's table, path and flags. The per-step columns and the masks are written by the compiled
+        ``kernels.observe.step_features`` when numba is there, else by ``observe_reference``'s numpy lines (the
+        same values, bit for bit)."""
         if not kernels.COMPILED:
-            return self.build_reference(protocol, passed, dtype)
+            return self.observe_reference(protocol, passed, dtype)
         s = protocol.scenario
         kn = protocol.knowledge
         view = protocol.view()
         if self._static_tasks is not None:
             np.copyto(self._tasks, self._static_tasks)
-        task_features(self._tasks, self._kernel_columns, self.scales.reward_unit, view.gain, view.can_bid,
+        mask = np.empty((s.n_agents, 1 + 2 * s.n_tasks), dtype=np.int8)
+        step_features(self._tasks, self._kernel_columns, self.scales.reward_unit, view.gain, view.can_bid,
                       view.outbid, view.members, s.task_agents, view.lowest_bid, view.group_total, view.displaced_bid,
                       view.in_bundle, kn.groups.own, kn.quit, protocol.quit_options(), protocol.round,
-                      kn.assigned_at, view.prereqs_met)
-        return self._finish(protocol, passed, dtype)
+                      kn.assigned_at, view.prereqs_met, self._buffer, self._bundle_sizes(kn),
+                      self._round_fraction(protocol), passed, mask)
+        return self._finish(protocol, dtype), mask
 
-    def build_reference(self, protocol: Protocol, passed: np.ndarray, dtype: np.dtype | type = np.float64
-                        ) -> np.ndarray:
-        """``build`` in numpy (the reference of ``kernels.observe.task_features``)."""
+    def observe_reference(self, protocol: Protocol, passed: np.ndarray, dtype: np.dtype | type = np.float64
+                          ) -> tuple[np.ndarray, np.ndarray]:
+        """``observe`` in numpy (the reference of ``kernels.observe.step_features``)."""
         s = protocol.scenario
         kn = protocol.knowledge
         view = protocol.view()
@@ -229,11 +233,29 @@ class ObservationBuilder:
         f[:, :, col("rounds_since_change")] = np.where(view.in_bundle, protocol.round - kn.assigned_at, 0)
         f[:, :, col("prereqs_met")] = view.prereqs_met
         f[:, :, col("group_complete")] = view.members == s.task_agents[None, :]
-        return self._finish(protocol, passed, dtype)
+        own = self._buffer
+        own[:, BUNDLE_SIZE] = self._bundle_sizes(kn) / s.n_tasks
+        own[:, ROUND] = self._round_fraction(protocol)
+        own[:, PASSED] = passed
+        m = s.n_tasks
+        mask = np.zeros((s.n_agents, 1 + 2 * m), dtype=np.int8)
+        mask[:, 0] = 1
+        mask[:, 1: m + 1] = view.can_bid
+        mask[:, m + 1:] = protocol.quit_options()
+        mask[passed, 1:] = 0
+        return self._finish(protocol, dtype), mask
 
-    def _finish(self, protocol: Protocol, passed: np.ndarray, dtype: np.dtype | type) -> np.ndarray:
-        """The mode-dependent task columns and the agent's own per-step features; the observations in ``dtype``."""
-        s = protocol.scenario
+    @staticmethod
+    def _bundle_sizes(knowledge) -> np.ndarray:
+        """(N,) |b_i| as floats."""
+        return np.fromiter(map(len, knowledge.bundles), dtype=float, count=len(knowledge.bundles))
+
+    @staticmethod
+    def _round_fraction(protocol: Protocol) -> float:
+        return min(protocol.round / protocol.max_rounds, 1.0)
+
+    def _finish(self, protocol: Protocol, dtype: np.dtype | type) -> np.ndarray:
+        """The mode-dependent task columns; the observations in ``dtype``."""
         kn = protocol.knowledge
         col = self._columns.__getitem__
         f = self._tasks
@@ -246,22 +268,7 @@ class ObservationBuilder:
         if self._popups:                                        # a task not yet released: its whole block is zero
             f[:, :, col("released")] = protocol.released
             f[:, ~protocol.released, :] = 0.0
-        own = self._buffer
-        own[:, 4] = np.fromiter(map(len, kn.bundles), dtype=float, count=s.n_agents) / s.n_tasks
-        own[:, 5] = min(protocol.round / protocol.max_rounds, 1.0)
-        own[:, 6] = passed
         return self._buffer.astype(dtype)
-
-    def action_masks(self, protocol: Protocol, passed: np.ndarray) -> np.ndarray:
-        """(N, 1 + 2M) int8: pass always, valid bids, allowed quits; a passed agent may only pass (sync rounds)."""
-        view = protocol.view()
-        n, m = view.gain.shape
-        mask = np.zeros((n, 1 + 2 * m), dtype=np.int8)
-        mask[:, 0] = 1
-        mask[:, 1: m + 1] = view.can_bid
-        mask[:, m + 1:] = protocol.quit_options()
-        mask[passed, 1:] = 0
-        return mask
 
 
 def state_vector(protocol: Protocol) -> np.ndarray:

@@ -25,17 +25,21 @@ import os
 
 import numpy as np
 
+from taskalloc_env import kernels
 from taskalloc_env.allocation import Allocation, Counters
 from taskalloc_env.bidding import BidView, refresh_rows
 from taskalloc_env.config import TaskAllocConfig, episode_bound
 from taskalloc_env.consensus import Snapshot, Traffic, exchange, snapshot
 from taskalloc_env.errors import ConfigError
 from taskalloc_env.group_table import GroupTable
+from taskalloc_env.kernels.quits import quittable
 from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.network import CommGraph, dropout_schedule, make_network
 from taskalloc_env.releases import release_ticks
 from taskalloc_env.scenario import Scenario
 from taskalloc_env.scoring import PathTable, Schedule, ScoringModel, TeamScore, team_score
+
+NO_TIMER = int(np.iinfo(np.int64).max)     # ``_quittable`` without the timer condition: every H_i[j] is earlier
 
 
 class ProtocolError(ValueError):
@@ -200,19 +204,30 @@ class Protocol:
         return self._score
 
     # -- Phase 1 decisions ---------------------------------------------------------------------------------------
-    def _quittable(self, counts: np.ndarray | None = None) -> np.ndarray:
+    def _quittable(self, counts: np.ndarray | None = None, assigned_before: int = NO_TIMER) -> np.ndarray:
         """(N, M) the timer-free quit conditions (thesis Alg 9 l. 2–3): L_j > 1, i holds j, i never quit j, and
-        the group is incomplete in i's table. Quitting, the pending-quit test and the timer reset share it.
+        the group is incomplete in i's table; with ``assigned_before``, also H_i[j] < it. Quitting, the
+        pending-quit test and the timer reset share it. Compiled (``kernels.quits.quittable``) when numba is
+        there, else ``quittable_reference``.
 
         ``counts`` are the member counts n_j of every table; without them, the view's (valid in the bundle phase).
         """
         kn = self.knowledge
         counts = self.view().members if counts is None else counts
-        quittable = counts < self.scenario.task_agents               # a new (N, M) array, then narrowed in place
-        quittable &= kn.groups.own > 0
-        quittable &= ~kn.quit
-        quittable &= ~kn.single
-        return quittable
+        if not kernels.COMPILED:
+            return self.quittable_reference(counts, assigned_before)
+        return quittable(counts, self.scenario.task_agents, kn.groups.own, kn.quit, kn.single, kn.assigned_at,
+                         assigned_before)
+
+    def quittable_reference(self, counts: np.ndarray, assigned_before: int = NO_TIMER) -> np.ndarray:
+        """``_quittable`` in numpy (the reference of ``kernels.quits.quittable``)."""
+        kn = self.knowledge
+        allowed = counts < self.scenario.task_agents                 # a new (N, M) array, then narrowed in place
+        allowed &= kn.groups.own > 0
+        allowed &= ~kn.quit
+        allowed &= ~kn.single
+        allowed &= kn.assigned_at < assigned_before
+        return allowed
 
     def quit_options(self) -> np.ndarray:
         """(N, M) quits the protocol allows now: quittable and the timer ran out, T − H_i[j] > δ (thesis Alg 9 l. 6,
@@ -221,7 +236,7 @@ class Protocol:
             if not self.cfg.task_quitting:
                 self._quits = self._no_quits
             else:
-                self._quits = self._quittable() & (self.round - self.knowledge.assigned_at > self.cfg.delta)
+                self._quits = self._quittable(assigned_before=self.round - self.cfg.delta)
         return self._quits
 
     def bid(self, agent: int, task: int, view: BidView | None = None) -> float:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 
 import numpy as np
@@ -17,6 +18,7 @@ from taskalloc_env.group_table import GroupOverflow, GroupTable
 from taskalloc_env.groups import Equipment
 from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.network import Deliveries
+from taskalloc_env.protocol import NO_TIMER
 from taskalloc_env.scenario import Agent, Scenario, Task, generate
 from taskalloc_env.scoring import PathTable, ScoringModel, paid_groups_reference, team_score
 
@@ -106,6 +108,23 @@ def test_compiled_group_writes_equal_the_reference(n, capacity, seed):
         assert outcomes[0] == outcomes[1]
         for name in ("count", "members", "bids", "own"):
             np.testing.assert_array_equal(getattr(compiled, name), getattr(reference, name), err_msg=name)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(1, 5), st.lists(st.integers(1, 4), min_size=1, max_size=5), st.integers(0, 2**32 - 1))
+def test_compiled_joined_equals_the_reference(n, capacity, seed):
+    """A table before and after random joins, re-bids and withdrawals: ``kernels.table.joined_members`` and
+    ``GroupTable.joined_reference`` name the same columns (and some column is named in most examples)."""
+    rng = np.random.default_rng(seed)
+    table = GroupTable.empty(n, n, np.array(capacity))
+    for _ in range(4):
+        before = table.copy()
+        for _ in range(int(rng.integers(0, 12))):
+            i, k, j = int(rng.integers(n)), int(rng.integers(n)), int(rng.integers(len(capacity)))
+            with contextlib.suppress(GroupOverflow):        # a write past L_j changes nothing
+                table.set(i, k, j, float(rng.choice([0.0, rng.uniform(1, 9)])))
+        np.testing.assert_array_equal(table.joined(before), table.joined_reference(before))
+        np.testing.assert_array_equal(before.joined(table), before.joined_reference(table))
 
 
 @st.composite
@@ -265,6 +284,42 @@ def test_compiled_view_rows_equal_the_reference(case):
     same(refresh_rows(first, [row], kn, *args, **options), bid_view(kn, *args, **options))
 
 
+@settings(max_examples=300, deadline=None)
+@given(st.integers(1, 5), st.integers(1, 7), st.sampled_from(["cbga", "cbga+tb", "cbga+tq", "cbgabi", "cbba"]),
+       st.sampled_from(["net", "literal"]), st.sampled_from([np.float32, np.float64]), st.integers(0, 2**32 - 1))
+def test_compiled_rule_equals_the_reference(n, m, name, team_value, dtype, seed):
+    """``policies.greedy.greedy_actions`` and ``CBGAPolicy.choose_reference`` on random masks and columns, with
+    ties, sums that tie only in ``dtype``, NaN and infinities: the same actions."""
+    from policies import make_policy
+
+    policy = make_policy(name)
+    policy.team_value = team_value
+    rng = np.random.default_rng(seed)
+    mask = rng.random((n, 1 + 2 * m)) < rng.choice([0.0, 0.2, 0.7, 1.0])
+    mask[:, 0] = True
+    # 1 + 1e-8 ties with 1 in float32, not in float64; 0.1 + 0.2 - 0.3 likewise with 0
+    values = np.array([0.0, 0.1, 0.2, 0.3, 1e-8, 1.0, -1.0, np.nan, np.inf, -np.inf])
+    weights = np.r_[1.0, 0.5, 0.5, 0.5, 1.0, 1.0, 0.3, rng.choice([0.0, 0.05], size=3)]
+    columns = [rng.choice(values, size=(n, m), p=weights / weights.sum()).astype(dtype)
+               for _ in policy.columns]
+    np.testing.assert_array_equal(policy.choose(mask, *columns), policy.choose_reference(mask, *columns))
+
+
+@pytest.mark.parametrize("team_value", ["net", "literal"])
+def test_the_compiled_rule_adds_in_the_columns_dtype(team_value):
+    """1 + 1e-8 is 1 in float32: the two bids tie and the lower task id wins, as in numpy; in float64 the second
+    would win."""
+    from policies import make_policy
+
+    policy = make_policy("cbgabi")
+    policy.team_value = team_value
+    mask = np.array([[True, True, True, False, False]])
+    for dtype, expected in ((np.float32, 1), (np.float64, 2)):
+        gain, total, displaced = (np.array(row, dtype=dtype) for row in ([[1.0, 1.0]], [[0.0, 1e-8]], [[0.0, 0.0]]))
+        assert policy.choose(mask, gain, total, displaced)[0] == expected
+        assert policy.choose_reference(mask, gain, total, displaced)[0] == expected
+
+
 def test_the_references_can_be_chosen_and_a_typo_is_refused():
     import subprocess
     import sys
@@ -281,10 +336,15 @@ def test_the_references_can_be_chosen_and_a_typo_is_refused():
 @pytest.mark.parametrize("sample", range(2))
 def test_compiled_observations_equal_the_reference(sample):
     """Every step of random-policy episodes on fuzzed configs (faults, pop-ups, ACBBA, task quitting included):
-    ``build`` with the compiled task features gives the same bytes as ``build_reference``."""
+    ``observe`` with the compiled step features gives the same observation and mask bytes as
+    ``observe_reference``; the kernel writes the own columns the layout names."""
     from evaluation.fuzz import draw_config
     from policies import make_policy
     from taskalloc_env import TaskAllocEnv
+    from taskalloc_env.kernels.observe import BUNDLE_SIZE, PASSED, ROUND
+    from taskalloc_env.observation import OWN_FEATURES
+
+    assert [OWN_FEATURES[c] for c in (BUNDLE_SIZE, ROUND, PASSED)] == ["bundle_size", "round", "passed"]
 
     rng, extra = np.random.default_rng(300 + sample), np.random.default_rng([300 + sample, 2])
     steps = 0
@@ -296,11 +356,41 @@ def test_compiled_observations_equal_the_reference(sample):
         while env.agents:
             protocol, builder, passed = env.protocol, env._builder, env._passed
             for dtype in (np.float32, np.float64):
-                compiled = builder.build(protocol, passed, dtype)
-                assert compiled.tobytes() == builder.build_reference(protocol, passed, dtype).tobytes()
+                compiled, compiled_masks = builder.observe(protocol, passed, dtype)
+                reference, reference_masks = builder.observe_reference(protocol, passed, dtype)
+                assert compiled.tobytes() == reference.tobytes()
+                assert compiled_masks.dtype == reference_masks.dtype and compiled_masks.shape == reference_masks.shape
+                assert compiled_masks.tobytes() == reference_masks.tobytes()
             steps += 1
             obs, *_ = env.step(policy.act(obs))
     assert steps > 100
+
+
+@pytest.mark.parametrize("sample", range(2))
+def test_compiled_quit_conditions_equal_the_reference(sample):
+    """Every step of random-policy episodes on fuzzed configs with task quitting: ``kernels.quits.quittable`` and
+    ``Protocol.quittable_reference`` agree, without the timer and with timers around the round, and quits happen."""
+    from evaluation.fuzz import draw_config
+    from policies import make_policy
+    from taskalloc_env import TaskAllocEnv
+
+    rng, extra = np.random.default_rng(500 + sample), np.random.default_rng([500 + sample, 2])
+    allowed = 0
+    for episode in range(12):
+        env = TaskAllocEnv(**draw_config(rng, extra) | {"task_quitting": True, "delta": int(rng.integers(0, 3))},
+                           max_cycles=60)
+        policy = make_policy("random")
+        obs, _ = env.reset(seed=episode)
+        policy.start(env, episode)
+        while env.agents:
+            protocol = env.protocol
+            counts = protocol.knowledge.member_counts()
+            for before in (NO_TIMER, protocol.round - 2, protocol.round, protocol.round + 1):
+                compiled = protocol._quittable(counts, before)
+                np.testing.assert_array_equal(compiled, protocol.quittable_reference(counts, before))
+                allowed += int(compiled.sum())
+            obs, *_ = env.step(policy.act(obs))
+    assert allowed > 0
 
 
 @pytest.mark.parametrize("sample", range(2))

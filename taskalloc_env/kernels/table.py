@@ -1,4 +1,5 @@
-"""One write to the group table, compiled; ``group_table.GroupTable.set_reference`` (Python) is the reference.
+"""Group-table kernels: one write (``set_member``; ``group_table.GroupTable.set_reference`` in Python is the
+reference) and the columns a member joined (``joined_members``; ``GroupTable.joined_reference``).
 
 ``set_member`` sets X_i[k][j] in the ``GroupTable`` layout (member ids increasing, empty slots last): k joins or
 re-bids in task j's column of holder i's table when the value is positive, leaves it otherwise, and the holder's own
@@ -46,3 +47,25 @@ def set_member(members: np.ndarray, bids: np.ndarray, count: np.ndarray, own: np
     if k == i:
         own[i, j] = value if value > 0 else 0.0
     return 1
+
+
+@jit
+def joined_members(members: np.ndarray, before: np.ndarray) -> np.ndarray:
+    """(N, M) whether (i, j) lists a member that ``before`` (N, M, W) did not list in the same column."""
+    n, m, w = members.shape
+    out = np.zeros((n, m), dtype=np.bool_)
+    for i in range(n):
+        for j in range(m):
+            for s in range(w):
+                k = members[i, j, s]
+                if k < 0:
+                    continue
+                new = True
+                for b in range(before.shape[2]):
+                    if before[i, j, b] == k:
+                        new = False
+                        break
+                if new:
+                    out[i, j] = True
+                    break
+    return out
