@@ -266,7 +266,7 @@ class TaskAllocEnv(ParallelEnv):
         """Validate the action dict against the live agents and their masks; apply ``invalid_action``."""
         if not isinstance(actions, Mapping):
             raise InvalidActionError(f"actions must be a dict agent -> action, got {type(actions).__name__}")
-        unknown = [a for a in actions if a not in self.agent_index or a not in self.agents]
+        unknown = [] if actions.keys() <= set(self.agents) else [a for a in actions if a not in self.agents]
         if unknown:
             message = f"actions for unknown or finished agents {unknown}; live agents: {self.agents}"
             if self.invalid_action == "raise":

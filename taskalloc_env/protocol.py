@@ -300,11 +300,11 @@ class Protocol:
         self.round += 1
         self._fail_agents(self.dropouts.get(self.round, ()))
         appeared = self._release_tasks()
-        # the groups before the merge: for the quit timers and the quit block (none without quitting)
-        before = kn.groups.copy() if self.cfg.task_quitting or kn.quit_blocked.any() else None
         own_before = kn.groups.own > 0
         snap = snapshot(kn, self.round)
         self._snapshots[self.round] = snap
+        # the groups before the merge (the snapshot's copy, never written): for the quit timers and the quit block
+        before = snap.groups if self.cfg.task_quitting or kn.quit_blocked.any() else None
         sent = self.network.send(self.round, np.flatnonzero(self.alive), snap.data_items)
         deliveries = self.network.deliver(self.round, self.alive)
         listing = self._quitter_listed()
@@ -426,7 +426,7 @@ class Protocol:
         sizes = np.fromiter(map(len, kn.bundles), dtype=np.int64, count=len(kn.bundles))
         holders = np.repeat(np.arange(len(sizes)), sizes)
         tasks = np.fromiter(itertools.chain.from_iterable(kn.bundles), dtype=np.int64, count=len(holders))
-        for i in np.unique(holders[kn.groups.own[holders, tasks] <= 0]).tolist():     # agents that lost a task
+        for i in sorted(set(holders[kn.groups.own[holders, tasks] <= 0].tolist())):   # agents that lost a task
             sequence = kn.bundles[i] if self.cfg.release_order == "bundle" else kn.paths[i]
             row = kn.groups.own[i].tolist()
             kn.release(i, next(j for j in sequence if row[j] <= 0), self.cfg.release_order)

@@ -21,7 +21,6 @@ from typing import Any
 import numpy as np
 
 from taskalloc_env.config import MAX_MAGNITUDE, TaskAllocConfig, type_counts
-from taskalloc_env.groups import Equipment
 
 NO_DEADLINE = np.inf
 
@@ -106,30 +105,30 @@ class Scenario:
             value = getattr(self, name)
             if not (np.isfinite(value) and 0 <= value <= MAX_MAGNITUDE):
                 raise ValueError(f"scenario {name} must be a finite number in [0, {MAX_MAGNITUDE:g}], got {value!r}")
-        if np.any(self.agent_speed <= 0):
+        if (self.agent_speed <= 0).any():
             raise ValueError(f"agent speeds must be > 0, got {self.agent_speed.tolist()}")
-        if np.any(self.task_agents < 1):
+        if (self.task_agents < 1).any():
             raise ValueError(f"every task needs L_j >= 1 agents, got {self.task_agents.tolist()}")
-        if np.any(self.task_end < self.task_start):
+        if (self.task_end < self.task_start).any():
             bad = np.flatnonzero(self.task_end < self.task_start).tolist()
             raise ValueError(f"tasks {bad} have end < start")
         positions = np.vstack([self.agent_pos, self.task_pos])
-        if np.any(np.abs(positions) > np.asarray(self.arena) * (1 + 1e-9)):
+        if (np.abs(positions) > np.asarray(self.arena) * (1 + 1e-9)).any():
             raise ValueError(f"positions must lie within ±arena {self.arena} on every axis")
-        if np.any(self.task_duration < 0) or np.any(self.task_reward < 0):
+        if (self.task_duration < 0).any() or (self.task_reward < 0).any():
             raise ValueError("task durations and rewards must be >= 0")
         items = self.task_equipment.sum(axis=1)
-        if np.any((items > 0) & (items != self.task_agents)):
+        if ((items > 0) & (items != self.task_agents)).any():
             bad = np.flatnonzero((items > 0) & (items != self.task_agents)).tolist()
             raise ValueError(f"tasks {bad} require a number of equipment items other than L_j: a task's equipment "
                              "names one item per agent, |te_j| = L_j, or none at all (thesis §3.1.3; "
                              "decoupling L_j from te_j is future work, thesis §6.1.2 and §6.2)")
-        if np.any(self.agent_equipment.sum(axis=1) > 1):
+        if (self.agent_equipment.sum(axis=1) > 1).any():
             bad = np.flatnonzero(self.agent_equipment.sum(axis=1) > 1).tolist()
             raise ValueError(f"agents {bad} carry several equipment items; every agent carries one type or none "
                              "(|ae_i| = 1 in every experiment of the thesis; with several items the group rules "
                              "of docs/algorithm.md depend on the order members join)")
-        if np.any(np.diag(self.task_prereqs)):
+        if np.diag(self.task_prereqs).any():
             raise ValueError("a task cannot be its own prerequisite (j ∉ P_j, thesis §3.1.3)")
         if self.task_prereqs.any() and _has_cycle(self.task_prereqs):
             raise ValueError("prerequisites contain a cycle; no task of the cycle could ever be done")
@@ -170,8 +169,7 @@ class Scenario:
         """Tasks no team of this scenario can ever complete, with the reason (reported, not an error)."""
         reasons: dict[int, str] = {}
         capable = self.eligible().sum(axis=0)
-        everyone = np.ones((self.n_agents, self.n_tasks), dtype=bool)
-        short = Equipment(self.agent_equipment, self.task_equipment).items(everyone) < self.task_equipment
+        short = self.task_equipment > self.agent_equipment.sum(axis=0)[None, :]     # items all agents carry < te_j
         for j in np.flatnonzero((capable < self.task_agents) | short.any(axis=1)).tolist():
             if capable[j] < self.task_agents[j]:
                 reasons[j] = (f"needs L_j = {self.task_agents[j]} agents but only {capable[j]} carry "
