@@ -22,6 +22,7 @@ from gymnasium import spaces
 from taskalloc_env import kernels
 from taskalloc_env.kernels.observe import BUNDLE_SIZE, PASSED, ROUND, step_features
 from taskalloc_env.kernels.observe import COLUMNS as KERNEL_COLUMNS
+from taskalloc_env.knowledge import LocalKnowledge
 from taskalloc_env.protocol import Protocol
 from taskalloc_env.scenario import Scenario
 
@@ -246,12 +247,13 @@ class ObservationBuilder:
         return self._finish(protocol, dtype), mask
 
     @staticmethod
-    def _bundle_sizes(knowledge) -> np.ndarray:
-        """(N,) |b_i| as floats."""
+    def _bundle_sizes(knowledge: LocalKnowledge) -> np.ndarray:
+        """(N,) the bundle sizes |b_i| as floats."""
         return np.fromiter(map(len, knowledge.bundles), dtype=float, count=len(knowledge.bundles))
 
     @staticmethod
     def _round_fraction(protocol: Protocol) -> float:
+        """The round as a fraction of the round bound (the own feature ``round``)."""
         return min(protocol.round / protocol.max_rounds, 1.0)
 
     def _finish(self, protocol: Protocol, dtype: np.dtype | type) -> np.ndarray:
