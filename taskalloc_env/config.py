@@ -10,7 +10,8 @@ One flat, frozen :class:`TaskAllocConfig` holds three groups of fields:
   ``task_quitting``, ``delta``, ``reset_on``, ``quit_block``, ``require_known_capacity``, ``consensus``,
   ``max_bundle``, ``max_rounds``; the network (``message_loss`` …); pop-up tasks (``popup_*``,
   ``mission_time_per_tick``; Johnson §4.1.3) and the asynchronous consensus ``consensus="acbba"`` (``message_ticks``,
-  ``build_ticks``, ``separation_time``, ``termination``, ``acbba_*``; Johnson §4.1).
+  ``build_ticks``, ``separation_time``, ``termination``, ``acbba_*``; Johnson §4.1); the observations'
+  ``team_features`` (ours, off by default).
 
 The named options mark points the sources leave open or state in more than one way; docs/configuration.md gives
 the source of each and docs/decisions.md the reasons for the defaults. Configs come from YAML files in
@@ -172,6 +173,8 @@ class TaskAllocConfig:
     acbba_row28_guard: bool = True
     acbba_time_refresh: str = "epsilon"
     acbba_ties: str = "lowest_id"
+    # -- observations (the learning interface; not in the sources) --
+    team_features: bool = False
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -290,7 +293,8 @@ def _validate(cfg: TaskAllocConfig) -> None:
         _check_positive_int("max_bundle", cfg.max_bundle)
     if cfg.max_rounds is not None:
         _check_positive_int("max_rounds", cfg.max_rounds)
-    for name in ("require_known_capacity", "task_quitting", "bid_warping", "acbba_row20_guard", "acbba_row28_guard"):
+    for name in ("require_known_capacity", "task_quitting", "bid_warping", "acbba_row20_guard", "acbba_row28_guard",
+                 "team_features"):
         if not isinstance(getattr(cfg, name), bool):
             _fail(name, getattr(cfg, name), "true | false")
     _check_positive_int("delta", cfg.delta, minimum=0)

@@ -7,7 +7,8 @@ learned) can slice the vector without magic numbers.
 
 Features that exist only in some modes are appended to every task's block only there, so observations of the
 default environment (and the models trained on it) keep their size: ``member_silence`` on a faulty network,
-``released`` with pop-up tasks. A task not yet released is invisible: its whole block is zero. Under
+``released`` with pop-up tasks, and with ``team_features`` (an option of ours, off by default) what every agent
+knows of the team at launch, seen from each task. A task not yet released is invisible: its whole block is zero. Under
 ``consensus="acbba"`` the own feature ``passed`` marks an agent whose builder is not ready (it may only pass).
 """
 
@@ -52,6 +53,14 @@ TASK_FEATURES = (
 # only on a faulty network (lost or delayed messages, failing agents), where silence carries information
 FAULT_FEATURES = (
     "member_silence",     # rounds since i last heard from or about its quietest fellow member / silence_timeout, ≤ 1
+)
+
+
+# only with team_features (ours, not in the sources): what every agent knows of the team at launch, each agent's
+# start and speed, seen from task j; the observation of a source agent holds its own state and the tables only
+TEAM_FEATURES = (
+    "sooner_agents",      # other agents whose straight flight from their start reaches j sooner / N
+    "nearest_other",      # the shortest start distance of another agent to j / arena diagonal (2 alone)
 )
 
 
@@ -142,6 +151,8 @@ class ObservationLayout:
             task_low[self.task_column(name)] = -RELATIVE_BOUND
             task_high[self.task_column(name)] = RELATIVE_BOUND
         task_high[self.task_column("distance")] = RELATIVE_BOUND
+        if "nearest_other" in self.task_names:
+            task_high[self.task_column("nearest_other")] = RELATIVE_BOUND
         low = np.concatenate([own_low, np.tile(task_low, self.n_tasks)])
         high = np.concatenate([own_high, np.tile(task_high, self.n_tasks)])
         return low, high
@@ -154,7 +165,8 @@ class ObservationBuilder:
         """``max_agents_per_task`` and ``max_rounds`` bound every instance the env can draw (for the space)."""
         s = protocol.scenario
         names = (TASK_FEATURES + (FAULT_FEATURES if protocol.cfg.faulty else ())
-                 + (POPUP_FEATURES if protocol.cfg.popup_tasks else ()))
+                 + (POPUP_FEATURES if protocol.cfg.popup_tasks else ())
+                 + (TEAM_FEATURES if protocol.cfg.team_features else ()))
         self.layout = ObservationLayout(s.n_tasks, len(s.equipment_names), names)
         self._bounds = (max_agents_per_task, max_rounds, s.n_agents)
         self.scales = Scales.of(s)
@@ -186,7 +198,20 @@ class ObservationBuilder:
         f[:, :, col("dx")], f[:, :, col("dy")], f[:, :, col("dz")] = rel[..., 0], rel[..., 1], rel[..., 2]
         f[:, :, col("distance")] = protocol.model.dist_agent_task / self.scales.diagonal
         f[:, :, col("equipment_match")] = protocol.equipment_match
+        if "sooner_agents" in self.layout.task_names:
+            f[:, :, col("sooner_agents")], f[:, :, col("nearest_other")] = self._team_features(protocol)
         return obs
+
+    def _team_features(self, protocol: Protocol) -> tuple[np.ndarray, np.ndarray]:
+        """(N, M) ``TEAM_FEATURES``: the other agents that reach each task sooner from their starts, ÷ N, and the
+        nearest other agent's start distance, ÷ the arena diagonal (``RELATIVE_BOUND`` when there is none)."""
+        s = protocol.scenario
+        distance = protocol.model.dist_agent_task                                  # (N, M)
+        flight = distance / s.agent_speed[:, None]
+        others = ~np.eye(s.n_agents, dtype=bool)[:, :, None]                      # (i, k, 1): k ≠ i
+        sooner = ((flight[None, :, :] < flight[:, None, :]) & others).sum(axis=1) / s.n_agents
+        nearest = np.where(others, distance[None, :, :], np.inf).min(axis=1) / self.scales.diagonal
+        return sooner, np.minimum(nearest, RELATIVE_BOUND)
 
     def observe(self, protocol: Protocol, passed: np.ndarray, dtype: np.dtype | type = np.float64
                 ) -> tuple[np.ndarray, np.ndarray]:
