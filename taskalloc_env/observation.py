@@ -208,10 +208,13 @@ class ObservationBuilder:
         s = protocol.scenario
         distance = protocol.model.dist_agent_task                                  # (N, M)
         flight = distance / s.agent_speed[:, None]
-        others = ~np.eye(s.n_agents, dtype=bool)[:, :, None]                      # (i, k, 1): k ≠ i
-        sooner = ((flight[None, :, :] < flight[:, None, :]) & others).sum(axis=1) / s.n_agents
-        nearest = np.where(others, distance[None, :, :], np.inf).min(axis=1) / self.scales.diagonal
-        return sooner, np.minimum(nearest, RELATIVE_BOUND)
+        sooner, nearest = np.zeros(distance.shape), np.full(distance.shape, np.inf)
+        for i in range(s.n_agents):                  # one agent at a time: (N, M) temporaries, not (N, N, M)
+            others = np.arange(s.n_agents) != i
+            sooner[i] = (flight[others] < flight[i]).sum(axis=0)
+            if others.any():
+                nearest[i] = distance[others].min(axis=0)
+        return sooner / s.n_agents, np.minimum(nearest / self.scales.diagonal, RELATIVE_BOUND)
 
     def observe(self, protocol: Protocol, passed: np.ndarray, dtype: np.dtype | type = np.float64
                 ) -> tuple[np.ndarray, np.ndarray]:
