@@ -1,0 +1,137 @@
+"""Where a policy loses to the optimum, round by round: the oracle hands over to the policy, or the reverse.
+
+    python -m evaluation.handover --policy learned:mappo_small_pooling_1m --policy cbgabi --rounds 1 2 3
+
+For each policy P and each K in ``--rounds`` it plays the same held-out instances three ways: P alone; the
+privileged ``oracle`` (``policies.oracle``: every agent bids along the exact optimum's path) for the first K
+rounds, then P; P for the first K rounds, then the oracle. The first shows how close P comes to the optimum after
+an optimal start (what P's later rounds lose), the second how far an optimal continuation gets from P's start
+(what P's first rounds commit it to; the oracle never quits, so it cannot undo a bid). A round is the protocol's
+round (``info["round"]``): under the synchronous protocols every agent's bids up to its pass, then the consensus
+(thesis Alg 5); round 0 is played before any message is exchanged. Under ``acbba`` it is a tick.
+Scores are divided by the exact optimum's mean (``policies.centralised.exact``), so the scenario must be small
+enough for it (``train_small``). docs/learning.md ("What stands between …") quotes this table.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from evaluation.episodes import evaluate, skip_reason, solve
+from evaluation.seeds import TEST_SEEDS
+from policies import OraclePolicy, Policy, make_policy
+from taskalloc_env.config import resolve_config
+from taskalloc_env.env import TaskAllocEnv
+from taskalloc_env.errors import ConfigError, run_cli
+
+
+class Handover(Policy):
+    """``first`` acts in the first ``rounds`` protocol rounds of each episode, ``then`` in the rest.
+
+    The round is the one the environment reports in every agent's info (``info["round"]``; a synchronous round
+    holds each agent's bids up to its pass, thesis Alg 5), so ``act`` needs the infos. Both policies are bound to the
+    environment at ``start``; each reads its state from the observations of the step it acts on (every policy of
+    ``policies`` does), so ``then`` needs nothing from the steps it did not play."""
+
+    def __init__(self, first: Policy, then: Policy, rounds: int) -> None:
+        super().__init__()
+        if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 0:
+            raise ValueError(f"rounds must be an integer >= 0, got {rounds!r}")
+        a, b = first.env_overrides, then.env_overrides
+        clash = sorted(k for k in a.keys() & b.keys() if a[k] != b[k])
+        if clash:
+            raise ValueError(f"{first.name} and {then.name} need different environments: "
+                             + ", ".join(f"{k}={a[k]!r} against {b[k]!r}" for k in clash))
+        self.first, self.then, self.rounds = first, then, rounds
+        self.name = f"{first.name} for {rounds} round(s), then {then.name}"
+
+    @property
+    def env_overrides(self) -> dict[str, Any]:
+        return {**self.first.env_overrides, **self.then.env_overrides}
+
+    def start(self, env: Any, seed: int | None = None) -> None:
+        super().start(env, seed)
+        self.first.start(env, seed)
+        self.then.start(env, seed)
+
+    def act(self, observations: Mapping[str, Mapping[str, np.ndarray]],
+            infos: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, int]:
+        if not observations:
+            return {}
+        if infos is None:
+            raise ValueError(f"{self.name} hands over by the round in the agents' infos; pass them to act")
+        current = infos[next(iter(observations))]["round"]
+        return (self.first if current < self.rounds else self.then).act(observations, infos)
+
+
+def scores(policy: Policy, scenario: str, seeds: Sequence[int]) -> np.ndarray:
+    """The score of ``policy`` on each seed of ``scenario`` (its environment built with the policy's overrides)."""
+    return np.array([a.score for a in evaluate(policy, {"scenario": scenario}, seeds)])
+
+
+def optimum(scenario: str, seeds: Sequence[int]) -> np.ndarray:
+    """The exact optimum of each seed's instance."""
+    env = TaskAllocEnv(scenario)
+    return np.array([solve("exact", env, int(s)).score for s in seeds])
+
+
+def rows(policy: str, scenario: str, rounds: Sequence[int], seeds: Sequence[int]) -> list[tuple[str, np.ndarray]]:
+    """(label, scores) of ``policy`` alone and handed over to / from the oracle after each number of rounds."""
+    out = [(policy, scores(make_policy(policy), scenario, seeds))]
+    for k in rounds:
+        out.append((f"oracle for {k} round(s), then {policy}",
+                    scores(Handover(OraclePolicy(), make_policy(policy), k), scenario, seeds)))
+        out.append((f"{policy} for {k} round(s), then the oracle",
+                    scores(Handover(make_policy(policy), OraclePolicy(), k), scenario, seeds)))
+    return out
+
+
+def markdown(table: Sequence[tuple[str, np.ndarray]], best: np.ndarray) -> str:
+    """Mean score, % of the optimum's mean, and the instances where the row reaches the optimum."""
+    lines = [f"| row | score | % of optimum | at the optimum (of {len(best)}) |", "|---|--:|--:|--:|",
+             f"| exact optimum | {best.mean():.1f} | 100.0 % | {len(best)} |"]
+    for label, s in table:
+        at = int(np.isclose(s, best, rtol=1e-9, atol=1e-6).sum())
+        lines.append(f"| {label} | {s.mean():.1f} | {100 * s.mean() / best.mean():.1f} % | {at} |")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> str:
+    parser = argparse.ArgumentParser(prog="python -m evaluation.handover", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenario", default="train_small", help="scenario name or YAML path (default train_small)")
+    parser.add_argument("--policy", action="append", metavar="NAME",
+                        help="a policy name (repeatable; default: learned:mappo_small_pooling_1m and cbgabi)")
+    parser.add_argument("--rounds", type=int, nargs="+", default=[1, 2, 3], help="hand-over rounds (default 1 2 3)")
+    parser.add_argument("--seed-start", type=int, default=TEST_SEEDS.start,
+                        help=f"first held-out seed (default {TEST_SEEDS.start})")
+    parser.add_argument("--episodes", type=int, default=len(TEST_SEEDS),
+                        help=f"number of held-out seeds (default {len(TEST_SEEDS)})")
+    args = parser.parse_args(argv)
+    if args.episodes < 1:
+        raise ConfigError(f"--episodes: got {args.episodes}; allowed: an integer >= 1")
+    if min(args.rounds) < 1:
+        raise ConfigError(f"--rounds: got {args.rounds}; allowed: integers >= 1")
+    reason = skip_reason("exact", resolve_config(args.scenario))
+    if reason:
+        raise ConfigError(f"--scenario {args.scenario}: {reason}")
+    policies = args.policy or ["learned:mappo_small_pooling_1m", "cbgabi"]
+    for name in policies:
+        try:
+            make_policy(name)
+        except ValueError as exc:       # a CheckpointError is a ConfigError already
+            raise ConfigError(f"--policy {name}: {exc}") from None
+    seeds = list(range(args.seed_start, args.seed_start + args.episodes))
+    best = optimum(args.scenario, seeds)
+    table = markdown([row for name in policies for row in rows(name, args.scenario, args.rounds, seeds)],
+                     best)
+    print(f"{args.scenario}, seeds {seeds[0]}–{seeds[-1]}\n\n{table}")
+    return table
+
+
+if __name__ == "__main__":
+    raise SystemExit(run_cli(main))
