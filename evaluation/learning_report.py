@@ -81,6 +81,7 @@ POOLING_1M = Config("MAPPO, pooling actor, state critic, 1 M steps", "mappo_smal
 POOLING_3M = Config("MAPPO, pooling actor, state critic, 3 M steps", "mappo_small_pooling_3m")
 TEAM = Config("MAPPO pooling, 1 M steps, team features (our observation option)", "mappo_small_pooling_team")
 ATTENTION = Config("MAPPO, attention actor, state critic", "mappo_small", {0: "mappo_small"})
+ATTENTION_1M = Config("MAPPO, attention actor, state critic, 1 M steps", "mappo_small_1m")
 MIXTURE = Config("MAPPO attention, curriculum 4×8 → 10×20", "mappo_mixture")
 LOSS = Config("MAPPO attention, trained under 20 % loss", "mappo_loss")
 LOSS_POOLING = Config("MAPPO pooling, trained under 20 % loss", "mappo_loss_pooling")
@@ -105,10 +106,10 @@ class Setting:
 
 SETTINGS = {s.name: s for s in (
     Setting("train_small", "training scenario, 4 × 8, L_j ∈ {1, 2}", "train_small", {},
-            (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, MIXTURE, MIXTURE_POOLING),
+            (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING),
             behaviour_cloning=True),
     Setting("default", "default scenario, 10 × 20, L_j = 4", "default", {},
-            (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, MIXTURE, MIXTURE_POOLING)),
+            (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING)),
     Setting("size_8x16", "8 × 16, L_j = 3 (no model trained on it)", "default",
             {"n_agents": 8, "n_tasks": 16, "agents_per_task": 3}, (ATTENTION, MIXTURE)),
     Setting("size_20x40", "20 × 40, L_j = 4 (no model trained on it)", "default",
@@ -381,7 +382,8 @@ def render(out: Path, doc: Path, curves: Path) -> None:
         path = out / f"heldout_{name}.json"
         if path.exists():
             text = replace_block(text, name, heldout_table(json.loads(path.read_text())))
-    configs = (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, MIXTURE, LOSS, MIXTURE_POOLING, LOSS_POOLING)
+    configs = (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, LOSS, MIXTURE_POOLING,
+               LOSS_POOLING)
     text = replace_block(text, "training", training_table(out / "runs", configs))
     plot_curves(curves, out / "runs", configs)
     doc.write_text(text)
