@@ -4,11 +4,11 @@
 
 For each policy P and each K in ``--rounds`` it plays the same held-out instances three ways: P alone; the
 privileged ``oracle`` (``policies.oracle``: every agent bids along the exact optimum's path) for the first K
-rounds, then P; P for the first K rounds, then the oracle. The first shows how close P comes to the optimum after
-an optimal start (what P's later rounds lose), the second how far an optimal continuation gets from P's start
-(what P's first rounds commit it to; the oracle never quits, so it cannot undo a bid). A round is the protocol's
-round (``info["round"]``): under the synchronous protocols every agent's bids up to its pass, then the consensus
-(thesis Alg 5); round 0 is played before any message is exchanged. Under ``acbba`` it is a tick.
+rounds, then P; P for the first K rounds, then the oracle. The hand-over to P shows how close P comes to the
+optimum after an optimal start (what P's later rounds lose), the hand-over from P how far an optimal continuation
+gets from P's start (what P's first rounds commit it to; the oracle never quits, so it cannot undo a bid). A round
+is the protocol's round (``info["round"]``): under the synchronous protocols every agent's bids up to its pass,
+then the consensus (thesis Alg 5); round 0 is played before any message is exchanged. Under ``acbba`` it is a tick.
 Scores are divided by the exact optimum's mean (``policies.centralised.exact``), so the scenario must be small
 enough for it (``train_small``). docs/learning.md ("What stands between …") quotes this table.
 """
