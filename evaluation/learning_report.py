@@ -123,6 +123,8 @@ SETTINGS = {s.name: s for s in (
     Setting("loss_default", "default scenario under 20 % message loss (a size mappo_loss never trained on)",
             "default", {"message_loss": 0.2}, (LOSS, LOSS_POOLING)),
 )}
+# every configuration of the settings, once, in the order they first appear: the rows of the training table
+CONFIGS = tuple({config.name: config for setting in SETTINGS.values() for config in setting.configs}.values())
 NAMES = {"random": "random", "cbga": "CBGA", "cbgabi": "CBGABI", "sgama": "SGAMA (centralised greedy)",
          "exact": "exact optimum", "oracle": "oracle: the optimum's paths bid through the protocol (privileged)",
          "bc": "behaviour cloning of CBGABI (SB3, 1 seed)"}
@@ -382,10 +384,8 @@ def render(out: Path, doc: Path, curves: Path) -> None:
         path = out / f"heldout_{name}.json"
         if path.exists():
             text = replace_block(text, name, heldout_table(json.loads(path.read_text())))
-    configs = (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, LOSS, MIXTURE_POOLING,
-               LOSS_POOLING)
-    text = replace_block(text, "training", training_table(out / "runs", configs))
-    plot_curves(curves, out / "runs", configs)
+    text = replace_block(text, "training", training_table(out / "runs", CONFIGS))
+    plot_curves(curves, out / "runs", CONFIGS)
     doc.write_text(text)
     print(f"rewrote {doc} and {curves}")
 
