@@ -15,7 +15,8 @@ configuration, one row per training seed, read from ``<runs>/<config>/seed<k>`` 
 ``summary.yaml`` to ``results/learning/runs/``, so that ``render`` needs nothing outside the repository. Rows
 already in the results file are kept while their weights are unchanged, and so is the row of a training seed whose
 model is no longer on disk. ``loss_small`` plays the ``train_small`` instances under 20 % message loss, with the same
-loss draws for every row; its centralised rows (SGAMA, the exact optimum) are copied from ``train_small``.
+loss draws for every row, and ``delay_small`` with every message delayed by 0–2 extra rounds, with the same delay
+draws; their centralised rows (SGAMA, the exact optimum) are copied from ``train_small``.
 
 ``render`` computes, per learned configuration, the mean over its seeds of each seed's mean score with a 95 %
 t-interval across seeds (Student t, k − 1 degrees of freedom), and per seed the paired comparison with CBGABI
@@ -86,6 +87,7 @@ MIXTURE = Config("MAPPO attention, curriculum 4×8 → 10×20", "mappo_mixture")
 LOSS = Config("MAPPO attention, trained under 20 % loss", "mappo_loss")
 LOSS_POOLING = Config("MAPPO pooling, trained under 20 % loss", "mappo_loss_pooling")
 MIXTURE_POOLING = Config("MAPPO pooling, curriculum 4×8 → 10×20", "mappo_mixture_pooling")
+DELAY_POOLING = Config("MAPPO pooling, trained under message delay (0–2 rounds)", "mappo_delay_pooling")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -122,6 +124,11 @@ SETTINGS = {s.name: s for s in (
             (SB3, POOLING, ATTENTION, LOSS, LOSS_POOLING), behaviour_cloning=True, centralised_from="train_small"),
     Setting("loss_default", "default scenario under 20 % message loss (a size mappo_loss never trained on)",
             "default", {"message_loss": 0.2}, (LOSS, LOSS_POOLING)),
+    # the same instances again, every message delayed by 0..2 extra rounds; as under loss, every row sees the same
+    # delay draws in the rounds it plays (the same messages are sent in every round, tests/test_learning_report.py)
+    Setting("delay_small", "training scenario with message delays of 0–2 rounds", "train_small", {"max_delay": 2},
+            (SB3, POOLING_1M, ATTENTION, LOSS_POOLING, DELAY_POOLING), behaviour_cloning=True,
+            centralised_from="train_small"),
 )}
 # every configuration of the settings, once, in the order they first appear: the rows of the training table
 CONFIGS = tuple({config.name: config for setting in SETTINGS.values() for config in setting.configs}.values())

@@ -1,11 +1,12 @@
-"""``evaluation.learning_report``: the message-loss set is paired draw for draw, and runs whose weights are gone
-keep their archived rows and training logs."""
+"""``evaluation.learning_report``: the message-loss and delay sets are paired draw for draw, and runs whose weights
+are gone keep their archived rows and training logs."""
 
 from __future__ import annotations
 
 import dataclasses
 import json
 import shutil
+from typing import Any
 
 import numpy as np
 import pytest
@@ -62,6 +63,41 @@ def test_every_row_of_the_loss_set_sees_the_same_losses(monkeypatch):
         assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b, field.name
 
 
+def network_draws(monkeypatch, policy: str, seed: int, **overrides) -> tuple[list[tuple[int, list, dict]], Any]:
+    """Per message batch of one episode of ``policy``: (round, senders, the network generator's state before the
+    batch draws its losses and delays), and the episode's allocation."""
+    log: list[tuple[int, list, dict]] = []
+    send = SEND
+
+    def spy(self, now, senders, items):
+        log.append((now, np.asarray(senders).tolist(), self.rng.bit_generator.state))
+        return send(self, now, senders, items)
+
+    monkeypatch.setattr(netmod.Network, "send", spy)
+    pol = make_policy(policy)
+    env = TaskAllocEnv("train_small", **{**overrides, **pol.env_overrides})
+    return log, rollout(env, pol, seed=seed)
+
+
+def test_every_row_of_the_delay_set_sees_the_same_delays(monkeypatch):
+    """Same seed: the same instance and, in every round both play, the same senders and generator state, so the
+    same delay (and loss) draws for every (sender, receiver) message."""
+    overrides = dict(lr.SETTINGS["delay_small"].overrides)
+    assert overrides == {"max_delay": 2} and lr.SETTINGS["delay_small"].centralised_from == "train_small"
+    for seed in (10000, 10001, 10002):
+        runs = [network_draws(monkeypatch, p, seed, **overrides) for p in ("random", "cbga", "cbgabi")]
+        assert all(allocation.counters.messages_delayed > 0 for _, allocation in runs)
+        first = runs[0][0]
+        for other, _ in runs[1:]:
+            common = min(len(first), len(other))
+            assert common > 1 and other[:common] == first[:common]
+    perfect = generate(resolve_config("train_small"), np.random.default_rng(10000))
+    delayed = generate(resolve_config("train_small", **overrides), np.random.default_rng(10000))
+    for field in dataclasses.fields(perfect):
+        a, b = getattr(perfect, field.name), getattr(delayed, field.name)
+        assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b, field.name
+
+
 def test_a_run_without_weights_keeps_its_archived_row(tmp_path, monkeypatch):
     """Re-evaluating plays only what is missing; a seed whose model is gone keeps its row, a new one is added."""
     config = lr.Config("test config", "cfg_gone")
@@ -87,7 +123,7 @@ def test_a_run_without_weights_keeps_its_archived_row(tmp_path, monkeypatch):
     assert not (out / "runs" / config.name / "seed1").exists()
 
 
-@pytest.mark.parametrize("name", ["train_small", "default", "size_20x40"])
+@pytest.mark.parametrize("name", ["train_small", "default", "size_20x40", "delay_small"])
 def test_committed_results_render(name):
     data = json.loads((lr.OUT / f"heldout_{name}.json").read_text())
     table = lr.heldout_table(data)
@@ -95,13 +131,16 @@ def test_committed_results_render(name):
 
 
 @pytest.mark.slow
-def test_the_centralised_rows_do_not_depend_on_message_loss():
-    """Why the loss set copies SGAMA and the exact optimum from the perfect-link set: they send no message."""
+@pytest.mark.parametrize("setting", ["loss_small", "delay_small"])
+def test_the_centralised_rows_do_not_depend_on_the_network(setting):
+    """Why the loss and delay sets copy SGAMA and the exact optimum from the perfect-link set: they send no
+    message."""
     from evaluation.episodes import Episode, run_episodes
 
-    perfect, lossy = resolve_config("train_small"), resolve_config("train_small", message_loss=0.2)
+    perfect = resolve_config("train_small")
+    faulty = resolve_config("train_small", **lr.SETTINGS[setting].overrides)
     for solver in ("sgama", "exact"):
         a, b = (run_episodes([Episode(solver, cfg, s) for s in (10000, 10001)], jobs=1, progress=False)
-                for cfg in (perfect, lossy))
+                for cfg in (perfect, faulty))
         assert [e["score"] for e in a] == [e["score"] for e in b]
-    assert lr.SETTINGS["loss_small"].centralised_from == "train_small"
+    assert lr.SETTINGS[setting].centralised_from == "train_small"
