@@ -1,0 +1,36 @@
+"""Every committed training config (``configs/training/*.yaml``) loads and passes its tool's checks."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from taskalloc_env import resources
+
+CONFIGS = sorted(Path(resources.folder("training")).glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.stem)
+def test_every_committed_training_config_loads_and_passes_its_checks(path, tmp_path):
+    argv = ["--config", path.stem, "--out-dir", str(tmp_path / "run")]
+    if path.stem.startswith("mappo_"):
+        from training import mappo
+
+        cfg = mappo.load_config(argv)
+    elif path.stem.startswith("distil_"):
+        from training import distil
+        from training.config import parse
+
+        cfg = parse(distil.DistilConfig, argv, "python -m training.distil", None)
+        cfg.check()
+    else:
+        from training import train
+
+        cfg = train.load_config(argv)
+    assert cfg.name == path.stem
+    assert not (tmp_path / "run").exists()      # loading a config writes nothing
+
+
+def test_the_configs_are_found():
+    assert {"mappo_small_pooling", "mappo_delay_pooling", "train_small", "distil_small"} <= {p.stem for p in CONFIGS}
