@@ -129,6 +129,8 @@ SETTINGS = {s.name: s for s in (
     Setting("delay_small", "training scenario with message delays of 0–2 rounds", "train_small", {"max_delay": 2},
             (SB3, POOLING_1M, ATTENTION, LOSS_POOLING, DELAY_POOLING), behaviour_cloning=True,
             centralised_from="train_small"),
+    Setting("delay_default", "default scenario with message delays of 0–2 rounds (a size no model trained on)",
+            "default", {"max_delay": 2}, (POOLING_1M, DELAY_POOLING), centralised_from="default"),
 )}
 # every configuration of the settings, once, in the order they first appear: the rows of the training table
 CONFIGS = tuple({config.name: config for setting in SETTINGS.values() for config in setting.configs}.values())
@@ -288,8 +290,8 @@ def heldout_table(data: Mapping[str, Any]) -> str:
     seeds = data["seeds"]
     copied = [r for r in rows if r.get("copied_from")]
     note = "" if not copied else (" " + " and ".join(r["label"] for r in copied) + f": the rows of the "
-                                  f"`{copied[0]['copied_from']}` set (they send no message, so loss cannot "
-                                  "change them).")
+                                  f"`{copied[0]['copied_from']}` set (they send no message, so the network "
+                                  "cannot change them).")
     return (f"Held-out seeds {seeds[0]}–{seeds[-1]} ({len(seeds)} instances, the same for every row).{note}\n\n"
             + markdown_table(head, body, align="lr" + "r" * (len(head) - 2)))
 
