@@ -16,7 +16,8 @@ configuration, one row per training seed, read from ``<runs>/<config>/seed<k>`` 
 already in the results file are kept while their weights are unchanged, and so is the row of a training seed whose
 model is no longer on disk. ``loss_small`` plays the ``train_small`` instances under 20 % message loss, with the same
 loss draws for every row, and ``delay_small`` with every message delayed by 0–2 extra rounds, with the same delay
-draws; their centralised rows (SGAMA, the exact optimum) are copied from ``train_small``.
+draws (``delay_default``: the default scenario under that delay); their centralised rows (SGAMA, the exact
+optimum) are copied from the perfect-link set of the same instances.
 
 ``render`` computes, per learned configuration, the mean over its seeds of each seed's mean score with a 95 %
 t-interval across seeds (Student t, k − 1 degrees of freedom), and per seed the paired comparison with CBGABI
