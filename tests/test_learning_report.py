@@ -45,6 +45,15 @@ def lost_messages(monkeypatch, policy: str, seed: int, **overrides) -> list[tupl
     return log
 
 
+def assert_same_instance(overrides: dict[str, Any]) -> None:
+    """The instance is drawn before the network's generator is spawned: the network options do not change it."""
+    perfect = generate(resolve_config("train_small"), np.random.default_rng(10000))
+    faulty = generate(resolve_config("train_small", **overrides), np.random.default_rng(10000))
+    for field in dataclasses.fields(perfect):
+        a, b = getattr(perfect, field.name), getattr(faulty, field.name)
+        assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b, field.name
+
+
 def test_every_row_of_the_loss_set_sees_the_same_losses(monkeypatch):
     """Same seed: the same instance and, in every round both play, the same lost (sender, receiver) messages."""
     overrides = dict(lr.SETTINGS["loss_small"].overrides)
@@ -55,12 +64,7 @@ def test_every_row_of_the_loss_set_sees_the_same_losses(monkeypatch):
         for other in logs[1:]:
             assert [r for r, _ in other[:len(logs[0])]] == [r for r, _ in logs[0][:len(other)]]
             assert all(a == b for a, b in zip(logs[0], other))
-    # the instance is drawn before the network's generator is spawned: loss does not change it
-    perfect = generate(resolve_config("train_small"), np.random.default_rng(10000))
-    lossy = generate(resolve_config("train_small", **overrides), np.random.default_rng(10000))
-    for field in dataclasses.fields(perfect):
-        a, b = getattr(perfect, field.name), getattr(lossy, field.name)
-        assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b, field.name
+    assert_same_instance(overrides)
 
 
 def network_draws(monkeypatch, policy: str, seed: int, **overrides) -> tuple[list[tuple[int, list, dict]], Any]:
@@ -91,11 +95,7 @@ def test_every_row_of_the_delay_set_sees_the_same_delays(monkeypatch):
         for other, _ in runs[1:]:
             common = min(len(first), len(other))
             assert common > 1 and other[:common] == first[:common]
-    perfect = generate(resolve_config("train_small"), np.random.default_rng(10000))
-    delayed = generate(resolve_config("train_small", **overrides), np.random.default_rng(10000))
-    for field in dataclasses.fields(perfect):
-        a, b = getattr(perfect, field.name), getattr(delayed, field.name)
-        assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b, field.name
+    assert_same_instance(overrides)
 
 
 def test_a_run_without_weights_keeps_its_archived_row(tmp_path, monkeypatch):
