@@ -114,9 +114,9 @@ SETTINGS = {s.name: s for s in (
     Setting("default", "default scenario, 10 × 20, L_j = 4", "default", {},
             (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING)),
     Setting("size_8x16", "8 × 16, L_j = 3 (no model trained on it)", "default",
-            {"n_agents": 8, "n_tasks": 16, "agents_per_task": 3}, (ATTENTION, MIXTURE)),
+            {"n_agents": 8, "n_tasks": 16, "agents_per_task": 3}, (POOLING_1M, ATTENTION, MIXTURE)),
     Setting("size_20x40", "20 × 40, L_j = 4 (no model trained on it)", "default",
-            {"n_agents": 20, "n_tasks": 40}, (POOLING, ATTENTION, MIXTURE)),
+            {"n_agents": 20, "n_tasks": 40}, (POOLING, POOLING_1M, ATTENTION, MIXTURE)),
     # the same instances as train_small (the scenario is drawn before the network's generator is spawned) under
     # 20 % loss; every row sees the same loss draws: the synchronous protocol sends every alive agent's message to
     # every neighbour in every round, so the k-th draw of an episode is the same (round, sender, receiver)

@@ -123,7 +123,7 @@ def test_a_run_without_weights_keeps_its_archived_row(tmp_path, monkeypatch):
     assert not (out / "runs" / config.name / "seed1").exists()
 
 
-@pytest.mark.parametrize("name", ["train_small", "default", "size_20x40", "delay_small"])
+@pytest.mark.parametrize("name", ["train_small", "default", "size_20x40", "size_8x16", "delay_small"])
 def test_committed_results_render(name):
     data = json.loads((lr.OUT / f"heldout_{name}.json").read_text())
     table = lr.heldout_table(data)
