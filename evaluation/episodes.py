@@ -1,9 +1,9 @@
 """Paired evaluation: several solvers on the same seeds, one row of figures per episode, parallel over processes.
 
 A *solver* is a policy name (``random``, ``cbba``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi``,
-``learned:<checkpoint>``, see ``policies.make_policy``), a centralised solver (``sgama``, ``exact``), or
-``cbba-duo`` (preferred-duo CBBA, ``policies.duo``: every task of the single-agent instance split into a lead and a
-helper part, messages and rounds counted as for any policy). Seed s
+``learned:<checkpoint>``, see ``policies.make_policy``), a centralised solver (``sgama``, ``exact``, ``lns``: the
+group search of ``policies.local_search``), or ``cbba-duo`` (preferred-duo CBBA, ``policies.duo``: every task of the
+single-agent instance split into a lead and a helper part, messages and rounds counted as for any policy). Seed s
 generates the same scenario instance for every solver (the paired design of thesis §5.3.1): the environment
 draws the instance from ``reset(seed=s)`` before any policy acts, and each row carries a fingerprint of the instance
 so that the pairing can be checked. Policies that need protocol options (``env_overrides``, e.g. task quitting)
@@ -33,7 +33,7 @@ from tqdm import tqdm
 
 from evaluation.distributed import BACKENDS, ray_map
 from evaluation.pool import parallel_map
-from policies import exact, make_policy, rollout, sgama
+from policies import exact, local_search, make_policy, rollout, sgama
 from policies.base import Policy
 from policies.centralised import MAX_AGENTS, MAX_TASKS
 from policies.duo import preferred_duo_cbba
@@ -44,7 +44,7 @@ from taskalloc_env import Scenario, TaskAllocConfig, TaskAllocEnv
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import max_required_agents
 
-CENTRALISED = {"sgama": ("SGAMA", sgama), "exact": ("exact", exact)}
+CENTRALISED = {"sgama": ("SGAMA", sgama), "exact": ("exact", exact), "lns": ("LNS", local_search)}
 # solvers that run a protocol on a transformed instance: (display name, solver(scenario, config) -> Allocation)
 SOLVERS = {"cbba-duo": ("CBBA preferred duo", preferred_duo_cbba)}
 METRICS = ("score", "valid_tasks", "conflicts", "rounds", "messages", "comm_steps", "rounds_to_agreement",
@@ -82,7 +82,7 @@ def skip_reason(solver: str, cfg: TaskAllocConfig) -> str | None:
 
 
 def solver_name(solver: str) -> str:
-    """The display name: the policy's own name (``CBGA+TQ``), ``SGAMA`` or ``exact``."""
+    """The display name: the policy's own name (``CBGA+TQ``), ``SGAMA``, ``exact`` or ``LNS``."""
     key = solver.lower()
     if key in CENTRALISED:
         return CENTRALISED[key][0]
@@ -133,8 +133,8 @@ def fingerprint(scenario: Scenario) -> str:
 def solve(solver: str | Policy, env: TaskAllocEnv, seed: int) -> Allocation:
     """Solve instance ``seed`` of ``env``: roll a policy out, or hand the instance to a centralised solver.
 
-    ``solver`` is a name (a policy, ``sgama``, ``exact`` or ``cbba-duo``) or a policy object; ``env`` must carry the
-    policy's ``env_overrides``.
+    ``solver`` is a name (a policy, ``sgama``, ``exact``, ``lns`` or ``cbba-duo``) or a policy object; ``env`` must
+    carry the policy's ``env_overrides``.
     """
     table = {**CENTRALISED, **SOLVERS}
     if isinstance(solver, str) and solver.lower() in table:

@@ -8,7 +8,8 @@ baselines on held-out instances.
 ``evaluate`` plays every row of a setting on the held-out seeds 10000 … (``evaluation.seeds.TEST_SEEDS``), through
 the experiment runner's ``run_episodes`` (seed s is the same instance for every row; ``--backend ray`` fans out over
 Ray), and writes per-seed figures to ``results/learning/heldout_<setting>.json``. Rows: the baselines (random,
-CBGA, CBGABI, SGAMA, the exact optimum where it is tractable, the oracle that bids along the optimum through the
+CBGA, CBGABI, SGAMA, LNS (``policies.local_search``, a lower bound on the optimum at every size), the exact
+optimum where it is tractable, the oracle that bids along the optimum through the
 protocol, ``policies.oracle``, behaviour cloning of CBGABI) and, per learned
 configuration, one row per training seed, read from ``<runs>/<config>/seed<k>`` (the training commands'
 ``--out-dir``; ``models/<name>`` for seeds that are committed models). It also copies each run's ``eval.csv`` and
@@ -16,8 +17,8 @@ configuration, one row per training seed, read from ``<runs>/<config>/seed<k>`` 
 already in the results file are kept while their weights are unchanged, and so is the row of a training seed whose
 model is no longer on disk. ``loss_small`` plays the ``train_small`` instances under 20 % message loss, with the same
 loss draws for every row, and ``delay_small`` with every message delayed by 0–2 extra rounds, with the same delay
-draws (``delay_default``: the default scenario under that delay); their centralised rows (SGAMA, the exact
-optimum) are copied from the perfect-link set of the same instances.
+draws (``delay_default``: the default scenario under that delay); their centralised rows (SGAMA, LNS, the
+exact optimum) are copied from the perfect-link set of the same instances.
 
 ``render`` computes, per learned configuration, the mean over its seeds of each seed's mean score with a 95 %
 t-interval across seeds (Student t, k − 1 degrees of freedom), and per seed the paired comparison with CBGABI
@@ -100,9 +101,9 @@ class Setting:
     scenario: str
     overrides: Mapping[str, Any]
     configs: tuple[Config, ...]
-    baselines: tuple[str, ...] = ("random", "cbga", "cbgabi", "sgama", "exact", "oracle")
+    baselines: tuple[str, ...] = ("random", "cbga", "cbgabi", "sgama", "lns", "exact", "oracle")
     behaviour_cloning: bool = False
-    # a setting on the same instances with only network overrides: its centralised rows (SGAMA, the exact optimum)
+    # a setting on the same instances with only network overrides: its centralised rows (SGAMA, LNS, the optimum)
     # send no message, so they are copied from there instead of being solved again
     centralised_from: str | None = None
 
@@ -135,7 +136,9 @@ SETTINGS = {s.name: s for s in (
 )}
 # every configuration of the settings, once, in the order they first appear: the rows of the training table
 CONFIGS = tuple({config.name: config for setting in SETTINGS.values() for config in setting.configs}.values())
+CENTRALISED = ("sgama", "lns", "exact")
 NAMES = {"random": "random", "cbga": "CBGA", "cbgabi": "CBGABI", "sgama": "SGAMA (centralised greedy)",
+         "lns": "LNS (centralised group search, ours)",
          "exact": "exact optimum", "oracle": "oracle: the optimum's paths bid through the protocol (privileged)",
          "bc": "behaviour cloning of CBGABI (SB3, 1 seed)"}
 
@@ -160,7 +163,7 @@ def rows_to_run(setting: Setting, runs: Path,
     file, by label and seed), so that evaluating new seeds does not drop the figures of runs whose weights were
     not kept."""
     cfg = resolve_config(setting.scenario, **setting.overrides)
-    rows = [{"label": NAMES[b], "kind": "centralised" if b in ("sgama", "exact") else "baseline", "solver": b}
+    rows = [{"label": NAMES[b], "kind": "centralised" if b in CENTRALISED else "baseline", "solver": b}
             for b in setting.baselines if not skip_reason(b, cfg)]
     if setting.behaviour_cloning:
         bc = resources.folder("models") / "train_small_bc" / "bc.json"
@@ -254,12 +257,15 @@ def wins_where_different(a: np.ndarray, b: np.ndarray) -> str:
 
 def heldout_table(data: Mapping[str, Any]) -> str:
     """Baselines: mean ± sd over instances. Learned configurations: mean ± 95 % CI across training seeds, and per
-    seed the paired comparison with CBGABI (Δ, p, wins where they differ) and with SGAMA."""
+    seed the paired comparison with CBGABI (Δ, p, wins where they differ) and with SGAMA. Where the optimum is out
+    of reach, the share of the optimum gives way to the share of the LNS score, the best allocation known."""
     rows = data["rows"]
     ref = {r["label"]: np.asarray(r["score"], dtype=float) for r in rows if r["kind"] != "learned"}
     cbgabi, sgama = ref[NAMES["cbgabi"]], ref.get(NAMES["sgama"])
     opt = ref.get(NAMES["exact"])
-    head = ["policy", "seeds", "score", "% of CBGABI", "% of optimum", "Δ vs CBGABI per seed (p)",
+    best = opt if opt is not None else ref.get(NAMES["lns"])
+    head = ["policy", "seeds", "score", "% of CBGABI", "% of optimum" if opt is not None else "% of LNS",
+            "Δ vs CBGABI per seed (p)",
             "wins vs CBGABI where they differ", "Δ vs SGAMA per seed (p)"] + \
         ([] if opt is None else ["Δ vs optimum per seed (p)"]) + ["rounds", "messages"]
     body = []
@@ -271,7 +277,7 @@ def heldout_table(data: Mapping[str, Any]) -> str:
         vs_sgama = "–" if sgama is None or r["label"] == NAMES["sgama"] else \
             f"{paired(s, sgama).mean_diff:+.1f} ({format_p(paired(s, sgama).p_t)})"
         body.append([r["label"], "–", f"{s.mean():.1f} ± {s.std(ddof=1):.1f} sd", f"{100 * pc.ratio:.1f} %",
-                     "–" if opt is None else f"{100 * s.mean() / opt.mean():.1f} %",
+                     "–" if best is None else f"{100 * s.mean() / best.mean():.1f} %",
                      "–" if r["label"] == NAMES["cbgabi"] else f"{pc.mean_diff:+.1f} ({format_p(pc.p_t)})",
                      "–" if r["label"] == NAMES["cbgabi"] else wins_where_different(s, cbgabi),
                      vs_sgama, *_versus(s, opt, r["label"] == NAMES["exact"]), *_protocol(r)])
@@ -280,9 +286,9 @@ def heldout_table(data: Mapping[str, Any]) -> str:
         means = [float(np.mean(r["score"])) for r in runs]
         scores = [np.asarray(r["score"], dtype=float) for r in runs]
         vs = [paired(s, cbgabi) for s in scores]
-        of_opt = "–" if opt is None else _pm(*across_seeds([100 * m / opt.mean() for m in means]), unit=" %")
+        of_best = "–" if best is None else _pm(*across_seeds([100 * m / best.mean() for m in means]), unit=" %")
         body.append([f"**{label}**", len(runs), _pm(*across_seeds(means)) + " (95 % CI, seeds)",
-                     _pm(*across_seeds([100 * p.ratio for p in vs]), unit=" %"), of_opt,
+                     _pm(*across_seeds([100 * p.ratio for p in vs]), unit=" %"), of_best,
                      "; ".join(f"{p.mean_diff:+.1f} ({format_p(p.p_t)})" for p in vs),
                      "; ".join(wins_where_different(s, cbgabi) for s in scores),
                      "–" if sgama is None else "; ".join(f"{paired(s, sgama).mean_diff:+.1f} "
@@ -290,7 +296,9 @@ def heldout_table(data: Mapping[str, Any]) -> str:
                      *([] if opt is None else ["; ".join(_versus(s, opt)[0] for s in scores)]), *_protocol_mean(runs)])
     seeds = data["seeds"]
     copied = [r for r in rows if r.get("copied_from")]
-    note = "" if not copied else (" " + " and ".join(r["label"] for r in copied) + f": the rows of the "
+    labels = [r["label"] for r in copied]
+    note = "" if not copied else (" " + ", ".join(labels[:-1]) + " and " * (len(labels) > 1) + labels[-1]
+                                  + f": the rows of the "
                                   f"`{copied[0]['copied_from']}` set (they send no message, so the network "
                                   "cannot change them).")
     return (f"Held-out seeds {seeds[0]}–{seeds[-1]} ({len(seeds)} instances, the same for every row).{note}\n\n"
@@ -381,6 +389,32 @@ def training_table(runs_dir: Path, configs: Sequence[Config]) -> str:
                            "load at start", "continues (actor, critic)"], body)
 
 
+def room_table(datas: Mapping[str, Mapping[str, Any]]) -> str:
+    """Per setting: how far above CBGABI the best allocation known lies (the optimum, else LNS, a lower bound on it)
+    and how much of that room the best learned configuration (by its mean over seeds) takes."""
+    body = []
+    for name, data in datas.items():
+        rows = data["rows"]
+        ref = {r["label"]: np.mean(r["score"]) for r in rows if r["kind"] != "learned"}
+        cbgabi, lns, opt = ref[NAMES["cbgabi"]], ref.get(NAMES["lns"]), ref.get(NAMES["exact"])
+        best = opt if opt is not None else lns
+        learned = {}
+        for r in rows:
+            if r["kind"] == "learned":
+                learned.setdefault(r["label"], []).append(float(np.mean(r["score"])))
+        label, mean = max(((f"{k} ({len(v)} seed{'s' if len(v) > 1 else ''})", float(np.mean(v)))
+                           for k, v in learned.items()), key=lambda kv: kv[1], default=("–", float("nan")))
+        share = "–" if best is None or best <= cbgabi or np.isnan(mean) else \
+            f"{100 * (mean - cbgabi) / (best - cbgabi):.0f} %"
+        body.append([f"`{name}`", f"{cbgabi:.1f}", "–" if lns is None else f"{100 * lns / cbgabi:.1f} %",
+                     "–" if opt is None else f"{100 * opt / cbgabi:.1f} %", label,
+                     "–" if np.isnan(mean) else f"{100 * mean / cbgabi:.1f} %", share])
+    return markdown_table(["held-out set", "CBGABI", "LNS, % of CBGABI", "optimum, % of CBGABI",
+                           "best learned configuration (mean over seeds)", "its % of CBGABI",
+                           "share of the room above CBGABI it takes (to the optimum, else to LNS)"], body,
+                          align="l" + "r" * 3 + "l" + "rr")
+
+
 def replace_block(text: str, name: str, block: str) -> str:
     begin, end = f"<!-- learning:{name}:begin -->", f"<!-- learning:{name}:end -->"
     if begin not in text or end not in text:
@@ -390,10 +424,11 @@ def replace_block(text: str, name: str, block: str) -> str:
 
 def render(out: Path, doc: Path, curves: Path) -> None:
     text = doc.read_text()
-    for name in SETTINGS:
-        path = out / f"heldout_{name}.json"
-        if path.exists():
-            text = replace_block(text, name, heldout_table(json.loads(path.read_text())))
+    datas = {name: json.loads(path.read_text()) for name in SETTINGS
+             if (path := out / f"heldout_{name}.json").exists()}
+    for name, data in datas.items():
+        text = replace_block(text, name, heldout_table(data))
+    text = replace_block(text, "room", room_table(datas))
     text = replace_block(text, "training", training_table(out / "runs", CONFIGS))
     plot_curves(curves, out / "runs", CONFIGS)
     doc.write_text(text)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from policies.base import Policy
 from policies.centralised import exact, sgama
+from policies.local_search import local_search
 from policies.oracle import OraclePolicy
 from policies.registry import POLICY_NAMES, make_policy
 from policies.rollout import rollout
@@ -19,6 +20,7 @@ __all__ = [
     "Policy",
     "RandomPolicy",
     "exact",
+    "local_search",
     "make_policy",
     "rollout",
     "sgama",
