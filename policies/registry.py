@@ -24,6 +24,7 @@ FACTORIES: dict[str, Callable[..., Policy]] = {
     "cbga+tb": lambda **kw: CBGAPolicy(team_bidding=True, **kw),
     "cbgabi": lambda **kw: CBGAPolicy(team_bidding=True, task_quitting=True, **kw),
     "oracle": OraclePolicy,
+    "oracle-lns": lambda **kw: OraclePolicy(solver="lns", **kw),
 }
 # name parameters: policy name -> {parameter in the name: keyword of its factory}
 PARAMETERS: dict[str, dict[str, str]] = {"cbga+tq": {"delta": "quit_threshold"},
@@ -55,7 +56,8 @@ def parse_name(name: str) -> tuple[str, dict[str, int]]:
 
 def make_policy(name: str, **kwargs) -> Policy:
     """``random``, ``pass``, ``cbba``, ``acbba``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi`` (``cbga+tq:delta=3``,
-    ``cbgabi:delta=3``: with the quit threshold δ), ``oracle`` (privileged: bids along the exact optimum) or
+    ``cbgabi:delta=3``: with the quit threshold δ), ``oracle`` (privileged: bids along the exact optimum),
+    ``oracle-lns`` (the same along the group search's allocation) or
     ``learned:<checkpoint>``."""
     if name.lower().startswith("learned:"):
         from policies.learned import LearnedPolicy

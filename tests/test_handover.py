@@ -84,11 +84,19 @@ def test_the_command_line_prints_each_row_and_a_long_oracle_start_reaches_the_op
     assert "train_small, seeds 10000–10002" in capsys.readouterr().out
 
 
+@pytest.mark.slow
+def test_the_lns_reference_divides_by_the_group_search_and_its_oracle_reaches_it():
+    table = handover.main(["--policy", "cbgabi", "--rounds", "50", "--episodes", "3", "--reference", "lns"])
+    lines = {line.split(" | ")[0].lstrip("| "): line for line in table.splitlines()[2:]}
+    assert "% of LNS" in table.splitlines()[0] and lines["LNS"].endswith("| 100.0 % | 3 |")
+    assert lines["oracle for 50 round(s), then cbgabi"].endswith("| 100.0 % | 3 |")
+
+
 @pytest.mark.parametrize("argv, words", [
     (["--rounds", "0"], ("--rounds", ">= 1")),
     (["--episodes", "0"], ("--episodes", ">= 1")),
     (["--policy", "nonsense"], ("--policy nonsense", "unknown policy")),
-    (["--scenario", "default"], ("--scenario default", "exact")),
+    (["--scenario", "default"], ("--scenario default", "exact", "--reference lns")),
 ])
 def test_bad_arguments_are_one_line_and_exit_2(argv, words, capsys):
     assert run_cli(lambda: handover.main(argv)) == 2
