@@ -3,7 +3,8 @@
     python -m policies compare --scenario default --episodes 20 --out results/compare
 
 Rows: random, CBBA (only where every L_j = 1), CBGA, CBGA+TQ, CBGA+TB, CBGABI, the centralised greedy SGAMA
-(thesis §3.3.3, Alg 7; no rounds or messages) and, for every committed checkpoint ``models/<name>/model.json``
+(thesis §3.3.3, Alg 7; no rounds or messages), the centralised group search LNS (``policies.local_search``, ours: a
+lower bound on the optimum, how much there is to take) and, for every committed checkpoint ``models/<name>/model.json``
 whose observation layout fits the scenario, the learned policy. Seed s is the same instance for every row (paired
 design, thesis §5.3.1). The table gives mean ± sd of the score (``scoring.team_score``), valid tasks, consensus
 rounds and messages received (``msgs / agent`` = messages / N_n, the thesis's per-agent communication steps),
@@ -42,7 +43,7 @@ from taskalloc_env import TaskAllocConfig, resolve_config, resources
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError
 
-BASELINES = ("random", "cbba", "cbga", "cbga+tq", "cbga+tb", "cbgabi", "sgama")
+BASELINES = ("random", "cbba", "cbga", "cbga+tq", "cbga+tb", "cbgabi", "sgama", "lns")
 REFERENCE = "CBGA"
 COLUMNS = (("score", "score"), ("valid_tasks", "valid tasks"), ("rounds", "rounds"),
            ("comm_steps_to_agreement", "msgs / agent to agreement"), ("comm_steps", "msgs / agent to the end"))
@@ -137,7 +138,8 @@ def compare(scenario: str, episodes: int, overrides: dict[str, Any], jobs: int =
               "(one per sender → receiver per round) / N_n, the thesis's communication steps, counted until the last "
               "change (to agreement: every agent then holds the final solution, the thesis's stop) and until the "
               "episode ends (D + 1 quiet rounds later); not conv. = episodes that hit the round bound (kept in the "
-              "means); SGAMA is centralised (no rounds or messages). Δ, p (paired t-test) and beats (share of seeds "
+              "means); SGAMA and LNS (a lower bound on the optimum, ours) are centralised (no rounds or messages). "
+              "Δ, p (paired t-test) and beats (share of seeds "
               f"with a higher score) are against {REFERENCE} on the same seeds.")
     text = "\n".join([setting, "", table, legend, *(f"- {n}" for n in notes)]) + "\n"
     if out is not None:

@@ -6,7 +6,7 @@ import csv
 
 from policies.__main__ import main
 
-BASELINE_ROWS = ("random", "CBGA", "CBGA+TQ", "CBGA+TB", "CBGABI", "SGAMA")
+BASELINE_ROWS = ("random", "CBGA", "CBGA+TQ", "CBGA+TB", "CBGABI", "SGAMA", "LNS")
 
 
 def _table_rows(text: str) -> dict[str, list[str]]:
@@ -20,7 +20,8 @@ def test_compare_prints_every_baseline_on_the_default_scenario(capsys):
     rows = _table_rows(out)
     assert set(rows) == set(BASELINE_ROWS)                     # L_j = 4: no CBBA row
     assert "CBBA: not run" in out
-    assert rows["SGAMA"][2] == "–" and rows["SGAMA"][3] == "–"   # centralised: no rounds, no messages
+    for name in ("SGAMA", "LNS"):                                   # centralised: no rounds, no messages
+        assert rows[name][2] == "–" and rows[name][3] == "–"
     assert all("±" in rows[name][0] for name in BASELINE_ROWS)
 
 
