@@ -50,7 +50,7 @@ import yaml
 from scipy import stats
 
 from evaluation.distributed import BACKENDS
-from evaluation.episodes import Episode, default_jobs, run_episodes, skip_reason
+from evaluation.episodes import CENTRALISED, Episode, default_jobs, run_episodes, skip_reason
 from evaluation.report import markdown_table
 from evaluation.stats import format_p, paired
 from taskalloc_env import resolve_config, resources
@@ -136,7 +136,6 @@ SETTINGS = {s.name: s for s in (
 )}
 # every configuration of the settings, once, in the order they first appear: the rows of the training table
 CONFIGS = tuple({config.name: config for setting in SETTINGS.values() for config in setting.configs}.values())
-CENTRALISED = ("sgama", "lns", "exact")
 NAMES = {"random": "random", "cbga": "CBGA", "cbgabi": "CBGABI", "sgama": "SGAMA (centralised greedy)",
          "lns": "LNS (centralised group search, ours)",
          "exact": "exact optimum", "oracle": "oracle: the optimum's paths bid through the protocol (privileged)",

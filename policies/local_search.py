@@ -29,7 +29,6 @@ import numpy as np
 from policies.centralised import sgama
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import TaskAllocConfig
-from taskalloc_env.groups import Equipment
 from taskalloc_env.scenario import Scenario, scenario_config
 from taskalloc_env.scoring import ScoringModel, team_score
 
@@ -45,7 +44,7 @@ class GroupSearch:
         self.scenario = scenario
         self.cfg = cfg
         self.model = ScoringModel.from_config(scenario, cfg)
-        self.equipment = Equipment(scenario.agent_equipment, scenario.task_equipment)
+        self.equipment = self.model.equipment
         self.eligible = scenario.eligible()
         self.cap = cfg.max_bundle or scenario.n_tasks
         self.rng = np.random.default_rng(seed)
@@ -104,8 +103,9 @@ class GroupSearch:
         """Search from ``start``; the best paths found and their team score."""
         current, current_score = [list(p) for p in start], self.score(start)
         filled = self.refill(current, 0.0, set())
-        if self.score(filled) >= current_score:     # a group whose prerequisites never pay may lower the score
-            current, current_score = filled, self.score(filled)
+        filled_score = self.score(filled)
+        if filled_score >= current_score:           # a group whose prerequisites never pay may lower the score
+            current, current_score = filled, filled_score
         for _ in range(iterations):
             held = sorted({j for path in current for j in path})
             if not held:
