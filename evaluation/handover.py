@@ -29,6 +29,7 @@ import numpy as np
 from evaluation.episodes import evaluate, skip_reason, solve
 from evaluation.seeds import TEST_SEEDS
 from policies import OraclePolicy, Policy, make_policy
+from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import resolve_config
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
@@ -73,41 +74,53 @@ class Handover(Policy):
         return (self.first if current < self.rounds else self.then).act(observations, infos)
 
 
-def scores(policy: Policy, scenario: str, seeds: Sequence[int]) -> np.ndarray:
-    """The score of ``policy`` on each seed of ``scenario`` (its environment built with the policy's overrides)."""
-    return np.array([a.score for a in evaluate(policy, {"scenario": scenario}, seeds)])
+def played(policy: Policy, scenario: str, seeds: Sequence[int]) -> list[Allocation]:
+    """``policy``'s allocation of each seed of ``scenario`` (its environment built with the policy's overrides)."""
+    return evaluate(policy, {"scenario": scenario}, seeds)
 
 
 REFERENCES = {"exact": "exact optimum", "lns": "LNS"}     # the solver the oracle follows: its label in the table
 
 
-def optimum(scenario: str, seeds: Sequence[int], reference: str = "exact") -> np.ndarray:
-    """The reference solver's score on each seed's instance (the exact optimum, or LNS's lower bound on it)."""
+def reference_allocations(scenario: str, seeds: Sequence[int], reference: str = "exact") -> list[Allocation]:
+    """The reference solver's allocation of each seed's instance (the exact optimum, or LNS's lower bound on it)."""
     env = TaskAllocEnv(scenario)
-    return np.array([solve(reference, env, int(s)).score for s in seeds])
+    return [solve(reference, env, int(s)) for s in seeds]
+
+
+def groups_kept(allocations: Sequence[Allocation], best: Sequence[Allocation]) -> np.ndarray:
+    """Per instance, the reference's valid tasks that end valid with the same members."""
+    return np.array([sum(1 for j in b.valid_tasks if j in a.valid_tasks and set(a.members[j]) == set(b.members[j]))
+                     for a, b in zip(allocations, best)])
 
 
 def rows(policy: str, scenario: str, rounds: Sequence[int], seeds: Sequence[int],
-         reference: str = "exact") -> list[tuple[str, np.ndarray]]:
-    """(label, scores) of ``policy`` alone and handed over to / from the oracle after each number of rounds."""
-    out = [(policy, scores(make_policy(policy), scenario, seeds))]
+         reference: str = "exact") -> list[tuple[str, list[Allocation]]]:
+    """(label, allocations) of ``policy`` alone and handed over to / from the oracle after each number of rounds."""
+    out = [(policy, played(make_policy(policy), scenario, seeds))]
     for k in rounds:
         out.append((f"oracle for {k} round(s), then {policy}",
-                    scores(Handover(OraclePolicy(reference), make_policy(policy), k), scenario, seeds)))
+                    played(Handover(OraclePolicy(reference), make_policy(policy), k), scenario, seeds)))
         out.append((f"{policy} for {k} round(s), then the oracle",
-                    scores(Handover(make_policy(policy), OraclePolicy(reference), k), scenario, seeds)))
+                    played(Handover(make_policy(policy), OraclePolicy(reference), k), scenario, seeds)))
     return out
 
 
-def markdown(table: Sequence[tuple[str, np.ndarray]], best: np.ndarray, reference: str = "exact") -> str:
-    """Mean score, % of the reference's mean, and the instances where the row reaches the reference's score."""
+def markdown(table: Sequence[tuple[str, Sequence[Allocation]]], best: Sequence[Allocation],
+             reference: str = "exact") -> str:
+    """Mean score, % of the reference's mean, the instances where the row reaches the reference's score, and how
+    many of the reference's groups (valid tasks and their members) it keeps."""
     name = REFERENCES[reference]
     reached = "at the optimum" if reference == "exact" else f"at {name} or above"
-    lines = [f"| row | score | % of {name} | {reached} (of {len(best)}) |", "|---|--:|--:|--:|",
-             f"| {name} | {best.mean():.1f} | 100.0 % | {len(best)} |"]
-    for label, s in table:
-        at = int((np.isclose(s, best, rtol=1e-9, atol=1e-6) | (s > best)).sum())
-        lines.append(f"| {label} | {s.mean():.1f} | {100 * s.mean() / best.mean():.1f} % | {at} |")
+    top = np.array([b.score for b in best])
+    lines = [f"| row | score | % of {name} | {reached} (of {len(best)}) | {name}'s groups kept (mean) |",
+             "|---|--:|--:|--:|--:|",
+             f"| {name} | {top.mean():.1f} | 100.0 % | {len(best)} | {np.mean([b.n_valid for b in best]):.1f} |"]
+    for label, allocations in table:
+        s = np.array([a.score for a in allocations])
+        at = int((np.isclose(s, top, rtol=1e-9, atol=1e-6) | (s > top)).sum())
+        lines.append(f"| {label} | {s.mean():.1f} | {100 * s.mean() / top.mean():.1f} % | {at} | "
+                     f"{groups_kept(allocations, best).mean():.1f} |")
     return "\n".join(lines)
 
 
@@ -140,7 +153,7 @@ def main(argv: Sequence[str] | None = None) -> str:
         except ValueError as exc:       # a CheckpointError is a ConfigError already
             raise ConfigError(f"--policy {name}: {exc}") from None
     seeds = list(range(args.seed_start, args.seed_start + args.episodes))
-    best = optimum(args.scenario, seeds, args.reference)
+    best = reference_allocations(args.scenario, seeds, args.reference)
     table = markdown([row for name in policies for row in rows(name, args.scenario, args.rounds, seeds,
                                                                args.reference)], best, args.reference)
     print(f"{args.scenario}, seeds {seeds[0]}–{seeds[-1]}\n\n{table}")
