@@ -3,7 +3,8 @@
     python -m evaluation.heldout                                   # the committed models, seeds 10000..10199
     python -m evaluation.heldout --scenario default --episodes 20 --learned "mine=runs/x/model.json"
 
-Rows: random, CBGA, CBGABI (scripted, decentralised), SGAMA (centralised greedy), the exact optimum, and every
+Rows: random, CBGA, CBGABI (scripted, decentralised), SGAMA (centralised greedy), LNS (``policies.local_search``,
+a lower bound on the optimum), the exact optimum where it is tractable, and every
 ``--learned LABEL=PATH`` checkpoint (default: the committed models ``models/train_small_bc/bc.json``,
 ``train_small``, ``train_small_bc``, ``mappo_small``, ``mappo_small_pooling`` and ``mappo_mixture``). The tables
 of ``docs/learning.md``, with several training seeds per configuration, come from ``evaluation.learning_report``.
@@ -39,7 +40,8 @@ DEFAULT_LEARNED = (
     ("MAPPO attention, curriculum", "mappo_mixture"),
 )
 SCRIPTED = (("random", "random"), ("CBGA", "cbga"), ("CBGABI", "cbgabi"))
-CENTRALISED = (("SGAMA (centralised greedy)", "sgama"), ("exact optimum", "exact"))
+CENTRALISED = (("SGAMA (centralised greedy)", "sgama"), ("LNS (centralised group search)", "lns"),
+               ("exact optimum", "exact"))
 
 
 def run_rows(scenario: str, seeds: Sequence[int], learned: Sequence[tuple[str, str]]) -> list[dict[str, Any]]:

@@ -1,0 +1,22 @@
+"""``evaluation.heldout``: the quick table's rows on the same held-out instances, the centralised ones ordered
+SGAMA ≤ LNS ≤ the exact optimum, and its markdown measured against CBGABI and the optimum."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from evaluation import heldout
+
+
+def test_the_quick_table_orders_the_centralised_rows_and_reads_them_against_cbgabi():
+    seeds = [10000, 10001, 10002]
+    rows = heldout.run_rows("train_small", seeds, learned=[])
+    scores = {r["label"]: np.array(r["scores"]) for r in rows}
+    assert list(scores) == ["random", "CBGA", "CBGABI", "SGAMA (centralised greedy)",
+                            "LNS (centralised group search)", "exact optimum"]
+    assert np.all(scores["SGAMA (centralised greedy)"] <= scores["LNS (centralised group search)"] + 1e-9)
+    assert np.all(scores["LNS (centralised group search)"] <= scores["exact optimum"] + 1e-9)
+    table = heldout.markdown(rows, seeds)
+    line = next(x for x in table.splitlines() if x.startswith("| exact optimum"))
+    share = 100 * scores["exact optimum"].mean() / scores["CBGABI"].mean()
+    assert line.split(" | ")[2:4] == [f"{share:.1f} %", "100.0 %"]
