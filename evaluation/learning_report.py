@@ -390,7 +390,8 @@ def training_table(runs_dir: Path, configs: Sequence[Config]) -> str:
 
 def room_table(datas: Mapping[str, Mapping[str, Any]]) -> str:
     """Per setting: how far above CBGABI the best allocation known lies (the optimum, else LNS, a lower bound on it)
-    and how much of that room the best learned configuration (by its mean over seeds) takes."""
+    and how much of that room the best learned configuration (by its mean over seeds; among those with every
+    training seed when there are any) takes."""
     body = []
     for name, data in datas.items():
         rows = data["rows"]
@@ -401,8 +402,9 @@ def room_table(datas: Mapping[str, Mapping[str, Any]]) -> str:
         for r in rows:
             if r["kind"] == "learned":
                 learned.setdefault(r["label"], []).append(float(np.mean(r["score"])))
+        complete = {k: v for k, v in learned.items() if len(v) == len(SEEDS)} or learned
         label, mean = max(((f"{k} ({len(v)} seed{'s' if len(v) > 1 else ''})", float(np.mean(v)))
-                           for k, v in learned.items()), key=lambda kv: kv[1], default=("–", float("nan")))
+                           for k, v in complete.items()), key=lambda kv: kv[1], default=("–", float("nan")))
         share = "–" if best is None or best <= cbgabi or np.isnan(mean) else \
             f"{100 * (mean - cbgabi) / (best - cbgabi):.0f} %"
         body.append([f"`{name}`", f"{cbgabi:.1f}", "–" if lns is None else f"{100 * lns / cbgabi:.1f} %",
