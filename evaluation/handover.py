@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from evaluation.episodes import evaluate, skip_reason, solve
-from evaluation.seeds import TEST_SEEDS
+from evaluation.seeds import add_heldout_arguments, heldout_seeds
 from policies import OraclePolicy, Policy, make_policy
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import resolve_config
@@ -134,13 +134,9 @@ def main(argv: Sequence[str] | None = None) -> str:
     parser.add_argument("--reference", choices=sorted(REFERENCES), default="exact",
                         help="what the oracle bids along and scores are divided by: the exact optimum (default; "
                              "small instances only) or LNS, a lower bound on it at any size")
-    parser.add_argument("--seed-start", type=int, default=TEST_SEEDS.start,
-                        help=f"first held-out seed (default {TEST_SEEDS.start})")
-    parser.add_argument("--episodes", type=int, default=len(TEST_SEEDS),
-                        help=f"number of held-out seeds (default {len(TEST_SEEDS)})")
+    add_heldout_arguments(parser)
     args = parser.parse_args(argv)
-    if args.episodes < 1:
-        raise ConfigError(f"--episodes: got {args.episodes}; allowed: an integer >= 1")
+    seeds = heldout_seeds(args)
     if min(args.rounds) < 1:
         raise ConfigError(f"--rounds: got {args.rounds}; allowed: integers >= 1")
     reason = skip_reason(args.reference, resolve_config(args.scenario))
@@ -152,7 +148,6 @@ def main(argv: Sequence[str] | None = None) -> str:
             make_policy(name)
         except ValueError as exc:       # a CheckpointError is a ConfigError already
             raise ConfigError(f"--policy {name}: {exc}") from None
-    seeds = list(range(args.seed_start, args.seed_start + args.episodes))
     best = reference_allocations(args.scenario, seeds, args.reference)
     table = markdown([row for name in policies for row in rows(name, args.scenario, args.rounds, seeds,
                                                                args.reference)], best, args.reference)

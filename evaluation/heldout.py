@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from evaluation.episodes import Episode, run_episode, skip_reason
-from evaluation.seeds import TEST_SEEDS
+from evaluation.seeds import add_heldout_arguments, heldout_seeds
 from evaluation.stats import format_mean_sd, format_p, paired
 from taskalloc_env import resources
 from taskalloc_env.config import resolve_config
@@ -96,15 +96,12 @@ def main(argv: list[str] | None = None) -> str:
     parser = argparse.ArgumentParser(prog="python -m evaluation.heldout", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenario", default="train_small", help="scenario name or YAML path (default train_small)")
-    parser.add_argument("--seed-start", type=int, default=TEST_SEEDS.start,
-                        help=f"first held-out seed (default {TEST_SEEDS.start})")
-    parser.add_argument("--episodes", type=int, default=len(TEST_SEEDS),
-                        help=f"number of held-out seeds (default {len(TEST_SEEDS)})")
+    add_heldout_arguments(parser)
     parser.add_argument("--learned", action="append", metavar="LABEL=PATH",
                         help="a checkpoint row (repeatable); default: the committed models")
     parser.add_argument("--json", type=Path, help="also write per-seed scores here")
     args = parser.parse_args(argv)
-    seeds = list(range(args.seed_start, args.seed_start + args.episodes))
+    seeds = heldout_seeds(args)
     learned = [tuple(item.split("=", 1)) for item in args.learned] if args.learned else \
         list(DEFAULT_LEARNED)
     rows = run_rows(args.scenario, seeds, learned)

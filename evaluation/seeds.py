@@ -10,6 +10,25 @@ from ``100_000 …``. Comparisons and experiments use seeds ``0 … N − 1``.
 
 from __future__ import annotations
 
+import argparse
+
+from taskalloc_env.errors import ConfigError
+
 TEST_SEEDS = range(10_000, 10_200)
 VALIDATION_SEED_START = 20_000
 DEMO_SEED_START = 100_000
+
+
+def add_heldout_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--seed-start`` and ``--episodes``: the held-out seeds a command plays (default: all of ``TEST_SEEDS``)."""
+    parser.add_argument("--seed-start", type=int, default=TEST_SEEDS.start,
+                        help=f"first held-out seed (default {TEST_SEEDS.start})")
+    parser.add_argument("--episodes", type=int, default=len(TEST_SEEDS),
+                        help=f"number of held-out seeds (default {len(TEST_SEEDS)})")
+
+
+def heldout_seeds(args: argparse.Namespace) -> list[int]:
+    """The seeds of ``add_heldout_arguments``' options; fewer than one episode is an error naming the option."""
+    if args.episodes < 1:
+        raise ConfigError(f"--episodes: got {args.episodes}; allowed: an integer >= 1")
+    return list(range(args.seed_start, args.seed_start + args.episodes))
