@@ -124,21 +124,20 @@ def markdown(table: Sequence[tuple[str, Sequence[Allocation]]], best: Sequence[A
     return "\n".join(lines)
 
 
-def main(argv: Sequence[str] | None = None) -> str:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.handover", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_table_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of every hand-over table: ``--scenario``, ``--policy``, ``--reference`` and the held-out seeds."""
     parser.add_argument("--scenario", default="train_small", help="scenario name or YAML path (default train_small)")
     parser.add_argument("--policy", action="append", metavar="NAME",
                         help="a policy name (repeatable; default: learned:mappo_small_pooling_1m and cbgabi)")
-    parser.add_argument("--rounds", type=int, nargs="+", default=[1, 2, 3], help="hand-over rounds (default 1 2 3)")
     parser.add_argument("--reference", choices=sorted(REFERENCES), default="exact",
-                        help="what the oracle bids along and scores are divided by: the exact optimum (default; "
-                             "small instances only) or LNS, a lower bound on it at any size")
+                        help="the solver the privileged part follows and scores are divided by: the exact optimum "
+                             "(default; small instances only) or LNS, a lower bound on it at any size")
     add_heldout_arguments(parser)
-    args = parser.parse_args(argv)
+
+
+def checked_table_arguments(args: argparse.Namespace) -> tuple[list[int], list[str]]:
+    """The held-out seeds and the policy names, once the reference fits the scenario and every name loads."""
     seeds = heldout_seeds(args)
-    if min(args.rounds) < 1:
-        raise ConfigError(f"--rounds: got {args.rounds}; allowed: integers >= 1")
     reason = skip_reason(args.reference, resolve_config(args.scenario))
     if reason:
         raise ConfigError(f"--scenario {args.scenario}: {reason} (--reference lns plays at any size)")
@@ -148,6 +147,18 @@ def main(argv: Sequence[str] | None = None) -> str:
             make_policy(name)
         except ValueError as exc:       # a CheckpointError is a ConfigError already
             raise ConfigError(f"--policy {name}: {exc}") from None
+    return seeds, policies
+
+
+def main(argv: Sequence[str] | None = None) -> str:
+    parser = argparse.ArgumentParser(prog="python -m evaluation.handover", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--rounds", type=int, nargs="+", default=[1, 2, 3], help="hand-over rounds (default 1 2 3)")
+    add_table_arguments(parser)
+    args = parser.parse_args(argv)
+    if min(args.rounds) < 1:
+        raise ConfigError(f"--rounds: got {args.rounds}; allowed: integers >= 1")
+    seeds, policies = checked_table_arguments(args)
     best = reference_allocations(args.scenario, seeds, args.reference)
     table = markdown([row for name in policies for row in rows(name, args.scenario, args.rounds, seeds,
                                                                args.reference)], best, args.reference)

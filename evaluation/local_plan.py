@@ -16,39 +16,28 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from evaluation.episodes import skip_reason
-from evaluation.handover import REFERENCES, Handover, markdown, played, reference_allocations
-from evaluation.seeds import add_heldout_arguments, heldout_seeds
+from evaluation.handover import (
+    Handover,
+    add_table_arguments,
+    checked_table_arguments,
+    markdown,
+    played,
+    reference_allocations,
+)
 from policies import make_policy
 from policies.local_plan import LocalPlanPolicy
-from taskalloc_env.config import resolve_config
 from taskalloc_env.errors import ConfigError, run_cli
 
 
 def main(argv: Sequence[str] | None = None) -> str:
     parser = argparse.ArgumentParser(prog="python -m evaluation.local_plan", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--scenario", default="train_small", help="scenario name or YAML path (default train_small)")
-    parser.add_argument("--policy", action="append", metavar="NAME",
-                        help="a policy name (repeatable; default: learned:mappo_small_pooling_1m and cbgabi)")
     parser.add_argument("--samples", type=int, default=24, help="teams drawn per agent (default 24)")
-    parser.add_argument("--reference", choices=sorted(REFERENCES), default="exact",
-                        help="what solves the drawn teams and divides the scores: the exact optimum (default; "
-                             "small instances only) or LNS, a lower bound on it at any size")
-    add_heldout_arguments(parser)
+    add_table_arguments(parser)
     args = parser.parse_args(argv)
-    seeds = heldout_seeds(args)
     if args.samples < 1:
         raise ConfigError(f"--samples: got {args.samples}; allowed: integers >= 1")
-    reason = skip_reason(args.reference, resolve_config(args.scenario))
-    if reason:
-        raise ConfigError(f"--scenario {args.scenario}: {reason} (--reference lns plays at any size)")
-    policies = args.policy or ["learned:mappo_small_pooling_1m", "cbgabi"]
-    for name in policies:
-        try:
-            make_policy(name)
-        except ValueError as exc:       # a CheckpointError is a ConfigError already
-            raise ConfigError(f"--policy {name}: {exc}") from None
+    seeds, policies = checked_table_arguments(args)
     planner = LocalPlanPolicy(args.samples, args.reference)      # one instance: its plans are reused by every row
     table = []
     for name in policies:
