@@ -4,11 +4,16 @@
 
 For each policy P it plays the held-out instances twice: P alone, and ``policies.local_plan`` for round 0 (each
 agent bids on the tasks that the exact optima of teams drawn around its own start give it in at least half of the
-draws), then P. Scores are divided by the exact optimum's mean, next to the oracle's hand-over of
-``evaluation.handover`` (the optimum's own round 0, then P): the two rows bracket what a round 0 played without
-hearing anyone can give. The local plan costs N × ``--samples`` exact solves per instance (about 5 s on
-``train_small`` with 24 draws); it is solved once per instance and reused by every policy's row.
-docs/learning.md ("What a first round can know") quotes this table.
+draws), then P. Scores are divided by the exact optimum's mean; read them next to the oracle's hand-over of
+``evaluation.handover`` (the optimum's own round 0, then P): the two bracket what a round 0 played without hearing
+anyone can give. With ``--reference lns`` the drawn teams are solved by the group search (``policies.local_search``)
+and scores are divided by its mean, at any size:
+
+    python -m evaluation.local_plan --scenario default --reference lns --episodes 40
+
+The local plan costs N × ``--samples`` solves per instance (about 5 s on ``train_small`` with 24 draws, about half
+a minute on the default scenario with LNS); it is computed once per instance and reused by every policy's row.
+docs/learning.md ("What a round 0 can know") quotes these tables.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ its action mask forbids is skipped). From round 1 on it passes: it is meant to b
 after round 0 (``evaluation.handover.Handover``; ``python -m evaluation.local_plan``).
 
 It is a measurement, like the oracle (``policies.oracle``), not a baseline: it costs N × ``samples`` solves per
-instance (about 5 s on ``train_small`` with 24 draws and ``exact``; about 40 s on the default scenario with
+instance (about 5 s on ``train_small`` with 24 draws and ``exact``; about half a minute on the default scenario with
 ``lns``, whose search is cut to ``LNS_ITERATIONS`` per draw). What it shows is how close a
 round 0 played without hearing anyone can come to the optimum's, which separates what a learned bidder lacks in
 information from what it lacks in learning (docs/learning.md). It reads the scenario only for its own agent's
