@@ -28,7 +28,7 @@ def test_the_plan_does_not_depend_on_where_the_teammates_are():
     env = TaskAllocEnv("train_small")
     optimum_moved = False
     for seed in (10_000, 10_001):
-        policy = bound(env, seed)
+        policy = bound(env, seed, samples=2)
         scenario = env.scenario
         for agent in range(scenario.n_agents):
             moved = scenario.agent_pos.copy()
@@ -97,6 +97,7 @@ def test_the_command_line_plays_each_policy_alone_and_after_the_local_plan(capsy
     assert "train_small, seeds 10000–10001" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_with_the_lns_reference_the_command_line_plays_at_the_default_size():
     table = local_plan.main(["--scenario", "default", "--reference", "lns", "--policy", "cbgabi", "--samples", "1",
                              "--episodes", "1"])
@@ -108,7 +109,7 @@ def test_with_the_lns_reference_the_command_line_plays_at_the_default_size():
 def test_the_local_plan_then_cbgabi_plays_valid_actions_on_many_instances():
     policy = Handover(LocalPlanPolicy(2), make_policy("cbgabi"), 1)
     env = TaskAllocEnv("train_small", **policy.env_overrides)
-    for seed in range(10):
+    for seed in range(6):
         allocation = rollout(env, policy, seed=seed)       # an action outside the mask would raise
         assert not allocation.conflicts
 
