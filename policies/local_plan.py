@@ -40,6 +40,7 @@ LNS_ITERATIONS = 50
 
 
 def lns_draw(scenario: Scenario, cfg: TaskAllocConfig) -> Allocation:
+    """The group search's allocation of one drawn team, ``LNS_ITERATIONS`` per start."""
     return local_search(scenario, cfg, iterations=LNS_ITERATIONS)
 
 
@@ -63,6 +64,7 @@ class LocalPlanPolicy(Policy):
     def start(self, env: Any, seed: int | None = None) -> None:
         super().start(env, seed)
         scenario = self.env.scenario
+        # the instance's identity (the teammates' starts only tell instances apart; no plan reads them)
         key = (seed, *(a.tobytes() for a in (scenario.agent_pos, scenario.task_pos, scenario.task_start)))
         if key not in self._memo:
             self._memo[key] = tuple(self.plan(scenario, i, np.random.default_rng([0 if seed is None else seed, i]))
