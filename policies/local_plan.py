@@ -29,6 +29,7 @@ import numpy as np
 from policies.base import Policy
 from policies.centralised import exact
 from policies.local_search import local_search
+from policies.oracle import bid_along
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import TaskAllocConfig
 from taskalloc_env.scenario import Scenario, generate
@@ -92,7 +93,6 @@ class LocalPlanPolicy(Policy):
         round_column = self.layout.own_names.index("round")
         actions = {}
         for agent, obs in observations.items():
-            mask = obs["action_mask"]
             plan = self.plans[self.env.agent_index[agent]] if obs["observation"][round_column] == 0 else ()
-            actions[agent] = next((1 + j for j in plan if mask[1 + j]), 0)
+            actions[agent] = bid_along(plan, obs["action_mask"])
         return actions

@@ -25,6 +25,11 @@ from policies.local_search import local_search
 SOLVERS = {"exact": exact, "lns": local_search}
 
 
+def bid_along(path: Sequence[int], mask: np.ndarray) -> int:
+    """The bid on the first task of ``path`` that ``mask`` allows, or pass (0) when none is left."""
+    return next((1 + j for j in path if mask[1 + j]), 0)
+
+
 class OraclePolicy(Policy):
     """Bids along the paths of ``solver``'s allocation, the exact optimum by default (privileged: it reads the
     scenario, not only the observation)."""
@@ -43,12 +48,8 @@ class OraclePolicy(Policy):
 
     def act(self, observations: Mapping[str, Mapping[str, np.ndarray]],
             infos: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, int]:
-        actions = {}
-        for agent, obs in observations.items():
-            mask = obs["action_mask"]
-            path = self.paths[self.env.agent_index[agent]]
-            actions[agent] = next((1 + j for j in path if mask[1 + j]), 0)
-        return actions
+        return {agent: bid_along(self.paths[self.env.agent_index[agent]], obs["action_mask"])
+                for agent, obs in observations.items()}
 
     def targets(self, agents: Sequence[str], masks: np.ndarray) -> np.ndarray:
         """(A, 1 + 2M) bool: the actions that keep each agent on the optimum, every allowed bid on a task of its

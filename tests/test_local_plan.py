@@ -16,9 +16,9 @@ from taskalloc_env import TaskAllocEnv
 from taskalloc_env.errors import run_cli
 
 
-def bound(env: TaskAllocEnv, seed: int, samples: int = 4) -> LocalPlanPolicy:
+def bound(env: TaskAllocEnv, seed: int, samples: int = 4, solver: str = "exact") -> LocalPlanPolicy:
     env.reset(seed=seed)
-    policy = LocalPlanPolicy(samples)
+    policy = LocalPlanPolicy(samples, solver)
     policy.start(env, seed)
     return policy
 
@@ -49,9 +49,7 @@ def test_alone_it_plans_its_solvers_path_and_reaches_its_score(solver):
     """With one agent every drawn team is the instance itself: the plan is the solver's path, played in round 0."""
     env = TaskAllocEnv("train_small", n_agents=1, agents_per_task=1)
     for seed in (3, 4, 5):
-        env.reset(seed=seed)
-        policy = LocalPlanPolicy(3, solver)
-        policy.start(env, seed)
+        policy = bound(env, seed, 3, solver)
         best = SOLVERS[solver](env.scenario, env.config)
         assert set(policy.plans[0]) == set(best.paths[0]) and best.paths[0]
         assert rollout(env, policy, seed=seed).score == pytest.approx(best.score, rel=1e-9)
