@@ -22,7 +22,6 @@ import argparse
 from collections.abc import Sequence
 
 from evaluation.handover import (
-    Handover,
     add_table_arguments,
     checked_table_arguments,
     markdown,
@@ -30,6 +29,7 @@ from evaluation.handover import (
     reference_allocations,
 )
 from policies import make_policy
+from policies.handover import Handover
 from policies.local_plan import LocalPlanPolicy
 from taskalloc_env.errors import ConfigError, run_cli
 

@@ -8,7 +8,7 @@ keeps its own start, solves each drawn instance (exactly, ``policies.centralised
 reach with the group search ``policies.local_search``, ``solver="lns"``) and plans to bid, in
 round 0, on the tasks that i's optimal path holds in at least half of the draws, the most frequent first (a task
 its action mask forbids is skipped). From round 1 on it passes: it is meant to be handed over to another policy
-after round 0 (``evaluation.handover.Handover``; ``python -m evaluation.local_plan``).
+after round 0 (``policies.handover.Handover``; ``python -m evaluation.local_plan``).
 
 It is a measurement, like the oracle (``policies.oracle``), not a baseline: it costs N × ``samples`` solves per
 instance (about 5 s on ``train_small`` with 24 draws and ``exact``; about half a minute on the default scenario with

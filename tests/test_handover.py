@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from evaluation import handover
-from evaluation.handover import Handover
 from policies import OraclePolicy, Policy, make_policy, rollout
+from policies.handover import Handover
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.errors import run_cli
 

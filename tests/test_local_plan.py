@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from evaluation import local_plan
-from evaluation.handover import Handover
 from policies import make_policy, rollout
 from policies.centralised import exact
+from policies.handover import Handover
 from policies.local_plan import SOLVERS, LocalPlanPolicy
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.errors import run_cli
