@@ -90,6 +90,7 @@ LOSS = Config("MAPPO attention, trained under 20 % loss", "mappo_loss")
 LOSS_POOLING = Config("MAPPO pooling, trained under 20 % loss", "mappo_loss_pooling")
 MIXTURE_POOLING = Config("MAPPO pooling, curriculum 4×8 → 10×20", "mappo_mixture_pooling")
 DELAY_POOLING = Config("MAPPO pooling, trained under message delay (0–2 rounds)", "mappo_delay_pooling")
+PLANNER = Config("round-0 planner learned from LNS on 10 × 20 (ours), then MAPPO pooling 1 M", "planner_default")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -110,10 +111,10 @@ class Setting:
 
 SETTINGS = {s.name: s for s in (
     Setting("train_small", "training scenario, 4 × 8, L_j ∈ {1, 2}", "train_small", {},
-            (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING),
+            (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING, PLANNER),
             behaviour_cloning=True),
     Setting("default", "default scenario, 10 × 20, L_j = 4", "default", {},
-            (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING)),
+            (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING, PLANNER)),
     Setting("size_8x16", "8 × 16, L_j = 3 (no model trained on it)", "default",
             {"n_agents": 8, "n_tasks": 16, "agents_per_task": 3}, (POOLING_1M, ATTENTION, MIXTURE)),
     Setting("size_20x40", "20 × 40, L_j = 4 (no model trained on it)", "default",
@@ -380,9 +381,11 @@ def training_table(runs_dir: Path, configs: Sequence[Config]) -> str:
             ppo = s.get("ppo", {})
             steps = s.get("steps", ppo.get("steps"))
             seconds = s.get("train_seconds", ppo.get("seconds"))
-            body.append([config.label, path.parent.name.removeprefix("seed"), f"{steps:,}".replace(",", " "),
+            # a planner (training.planner) learns from labelled states, not from agent steps
+            body.append([config.label, path.parent.name.removeprefix("seed"),
+                         "–" if steps is None else f"{steps:,}".replace(",", " "),
                          f"{s['wall_seconds'] / 60:.1f}", f"{s['cpu_seconds'] / 60:.1f}" if "cpu_seconds" in s else
-                         "–", f"{steps / seconds:.0f}", s.get("load_average_at_start", "–"),
+                         "–", "–" if steps is None else f"{steps / seconds:.0f}", s.get("load_average_at_start", "–"),
                          ", ".join(s.get("init_from", [])) or "–"])
     return markdown_table(["configuration", "seed", "agent steps", "wall min", "CPU min", "agent steps/s",
                            "load at start", "continues (actor, critic)"], body)

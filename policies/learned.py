@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
@@ -59,10 +59,10 @@ class LearnedPolicy(Policy):
         self.columns: np.ndarray | None = None     # observation columns the actor reads (None: all of them)
 
     @classmethod
-    def from_checkpoint(cls, checkpoint: Checkpoint, deterministic: bool = True, name: str = "learned"
-                        ) -> LearnedPolicy:
+    def from_checkpoint(cls, checkpoint: Checkpoint, deterministic: bool = True, name: str = "learned",
+                        **kwargs: Any) -> Self:
         return cls(checkpoint.actor, checkpoint.own_features, checkpoint.task_features, checkpoint.env_overrides,
-                   checkpoint.meta, deterministic=deterministic, name=name)
+                   checkpoint.meta, deterministic=deterministic, name=name, **kwargs)
 
     @classmethod
     def load(cls, source: str | Path, deterministic: bool = True, name: str | None = None,
@@ -92,23 +92,25 @@ class LearnedPolicy(Policy):
 
     def act(self, observations: Mapping[str, Mapping[str, np.ndarray]],
             infos: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, int]:
-        from policies.networks import masked_logits
-
         if not observations:
             return {}
         agents = list(observations)
         obs, masks = stack_observations(observations, agents)
         if self.columns is not None:
             obs = obs[:, self.columns]
+        return {a: int(c) for a, c in zip(agents, self.decide(obs, masks))}
+
+    def decide(self, obs: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        """One action per row: the actor's observation (its own features only) and the action mask."""
+        from policies.networks import masked_logits
+
         logits = masked_logits(self.actor, obs, masks).cpu().numpy().astype(np.float64)
         logits[masks == 0] = -np.inf
         probs = np.exp(logits - logits.max(axis=1, keepdims=True))
         probs /= probs.sum(axis=1, keepdims=True)
         if self.deterministic:
-            choice = greedy_actions(logits, probs)
-        else:
-            choice = np.array([self.rng.choice(len(p), p=p) for p in probs])
-        return {a: int(c) for a, c in zip(agents, choice)}
+            return greedy_actions(logits, probs)
+        return np.array([self.rng.choice(len(p), p=p) for p in probs])
 
 
 def greedy_actions(logits: np.ndarray, probs: np.ndarray) -> np.ndarray:

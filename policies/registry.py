@@ -9,6 +9,7 @@ A name may carry parameters after a colon: ``cbga+tq:delta=3`` is CBGA with task
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 from policies.base import Policy
 from policies.oracle import OraclePolicy
@@ -58,12 +59,37 @@ def make_policy(name: str, **kwargs) -> Policy:
     """``random``, ``pass``, ``cbba``, ``acbba``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi`` (``cbga+tq:delta=3``,
     ``cbgabi:delta=3``: with the quit threshold δ), ``oracle`` (privileged: bids along the exact optimum),
     ``oracle-lns`` (the same along the group search's allocation) or
-    ``learned:<checkpoint>``."""
+    ``learned:<checkpoint>`` (a trained bidder, or a round-0 planner handed over to the
+    policy its checkpoint names, ``policies.round_zero``)."""
     if name.lower().startswith("learned:"):
-        from policies.learned import LearnedPolicy
-
-        return LearnedPolicy.load(name.split(":", 1)[1], **kwargs)
+        return load_learned(name.split(":", 1)[1], **kwargs)
     key, params = parse_name(name)
     if key not in FACTORIES:
         raise ValueError(f"unknown policy {name!r}; known: {', '.join(POLICY_NAMES)}")
     return FACTORIES[key](**params, **kwargs)
+
+
+def load_learned(source: str, planner_allowed: bool = True, **kwargs: Any) -> Policy:
+    """``learned:<source>``: a ``LearnedPolicy``, or for a round-0 planner's checkpoint (``policies.round_zero``)
+    the planner handed over after round 0 to the policy its meta names, which may not be a planner itself (it would
+    load without end). ``kwargs`` are ``LearnedPolicy.load``'s options; a planner takes none."""
+    from policies.checkpoint import CheckpointError, load
+    from policies.handover import Handover
+    from policies.learned import LearnedPolicy, resolve
+    from policies.round_zero import PLANNER, RoundZeroPlanner, planner_meta
+
+    checkpoint = load(resolve(source), allow_pickle=kwargs.pop("allow_pickle", False))
+    name = kwargs.pop("name", None) or f"learned:{source}"
+    if checkpoint.meta.get("algo") != PLANNER:
+        return LearnedPolicy.from_checkpoint(checkpoint, name=name, **kwargs)
+    if not planner_allowed:
+        raise CheckpointError(f"{source}: a planner's 'then' is itself a planner; it must be a bidding policy")
+    then, threshold = planner_meta(checkpoint, source)
+    if kwargs:
+        raise ValueError(f"{name} is a planner; options {sorted(kwargs)} are not taken")
+    planner = RoundZeroPlanner.from_checkpoint(checkpoint, name=f"{name} (round-0 planner)", threshold=threshold)
+    follower = (load_learned(then.split(":", 1)[1], planner_allowed=False) if then.lower().startswith("learned:")
+                else make_policy(then))
+    policy = Handover(planner, follower, 1)
+    policy.name = name
+    return policy

@@ -18,11 +18,12 @@ def test_every_committed_training_config_loads_and_passes_its_checks(path, tmp_p
         from training import mappo
 
         cfg = mappo.load_config(argv)
-    elif path.stem.startswith("distil_"):
-        from training import distil
+    elif path.stem.startswith(("distil_", "planner_")):
+        from training import distil, planner
         from training.config import parse
 
-        cfg = parse(distil.DistilConfig, argv, "python -m training.distil", None)
+        kind = distil.DistilConfig if path.stem.startswith("distil_") else planner.PlannerConfig
+        cfg = parse(kind, argv, "python -m training", None)
         cfg.check()
     else:
         from training import train
@@ -33,4 +34,5 @@ def test_every_committed_training_config_loads_and_passes_its_checks(path, tmp_p
 
 
 def test_the_configs_are_found():
-    assert {"mappo_small_pooling", "mappo_delay_pooling", "train_small", "distil_small"} <= {p.stem for p in CONFIGS}
+    assert {"mappo_small_pooling", "mappo_delay_pooling", "train_small", "distil_small",
+            "planner_default"} <= {p.stem for p in CONFIGS}

@@ -201,7 +201,8 @@ class Group:
 
 # -- networks ---------------------------------------------------------------------------------------------------------
 class ActorSpec(Protocol):
-    """The config fields an actor is built from (``MappoConfig``, ``training.distil.DistilConfig``)."""
+    """The config fields an actor is built from (``MappoConfig``, ``training.distil.DistilConfig``,
+    ``training.planner.PlannerConfig``)."""
 
     actor: str
     hidden: int

@@ -1,0 +1,60 @@
+"""A learned round-0 plan, then a bidding policy: the local plan (``policies.local_plan``) learned (ours).
+
+In round 0 no message has been exchanged (thesis Alg 5), so an agent's first bundle can only rest on what it knows
+itself. ``policies.local_plan`` plans that bundle by solving drawn teams around the agent's own start; the planner
+trained by ``training.planner`` learns the same thing from its observation: for each task, the probability that
+the task is on the agent's path in the solver's allocation. ``RoundZeroPlanner`` plays it the local plan's way: in
+round 0 it bids on the most likely task its mask allows while that probability is at least ``threshold``, else
+passes. It passes in every later round; a planner checkpoint names the policy that takes over (``then``), and
+``policies.registry`` loads the pair as one policy, so ``learned:<planner checkpoint>`` runs anywhere a policy name
+does. Execution stays decentralised: each agent reads only its own observation.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from policies.checkpoint import Checkpoint, CheckpointError
+from policies.learned import LearnedPolicy
+
+PLANNER = "round0-planner"      # the checkpoint's meta["algo"] of a planner
+
+
+class RoundZeroPlanner(LearnedPolicy):
+    """Round 0: bids on the allowed task most likely on its path while that probability is ≥ ``threshold``;
+    later rounds: passes. The actor's bid logits are read as per-task log-odds (``training.planner``)."""
+
+    def __init__(self, *args: Any, threshold: float = 0.5, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not 0 < threshold < 1:
+            raise ValueError(f"{self.name}: threshold must be a number in (0, 1), got {threshold!r}")
+        self.threshold = float(threshold)
+
+    def probabilities(self, obs: np.ndarray) -> np.ndarray:
+        """(B, M) the probability that each task is on the agent's path, from the actor's observations (B, D)."""
+        from policies.networks import masked_logits
+
+        m = self.layout.n_tasks
+        every = np.ones((len(obs), 1 + 2 * m), dtype=bool)     # the log-odds of every task, allowed or not
+        return 1.0 / (1.0 + np.exp(-masked_logits(self.actor, obs, every).numpy()[:, 1: m + 1].astype(np.float64)))
+
+    def decide(self, obs: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        m = self.layout.n_tasks
+        p = np.where(masks[:, 1: m + 1] > 0, self.probabilities(obs), -1.0)
+        best = p.argmax(axis=1)
+        first_round = obs[:, self.layout.own_names.index("round")] == 0     # own features lead every observation
+        bid = first_round & (p[np.arange(len(obs)), best] >= self.threshold)
+        return np.where(bid, 1 + best, 0)
+
+
+def planner_meta(checkpoint: Checkpoint, where: str) -> tuple[str, float]:
+    """(``then``, ``threshold``) from a planner checkpoint's meta, each checked."""
+    then, threshold = checkpoint.meta.get("then"), checkpoint.meta.get("threshold", 0.5)
+    if not isinstance(then, str) or not then:
+        raise CheckpointError(f"{where}: a planner checkpoint names the policy that takes over in meta 'then' (a "
+                              f"policy name), got {then!r}")
+    if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not 0 < threshold < 1:
+        raise CheckpointError(f"{where}: meta 'threshold' must be a number in (0, 1), got {threshold!r}")
+    return then, float(threshold)

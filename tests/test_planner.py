@@ -1,0 +1,185 @@
+"""The learned round-0 plan: its labels, its loss, how it plays and hands over, its checkpoint and its command line
+(``training.planner``, ``policies.round_zero``)."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+import torch as th
+
+from policies import OraclePolicy, make_policy, rollout
+from policies.base import stack_observations
+from policies.checkpoint import CheckpointError
+from policies.handover import Handover
+from policies.networks import PoolingActor
+from policies.round_zero import RoundZeroPlanner
+from taskalloc_env import TaskAllocEnv
+from taskalloc_env.errors import run_cli
+from training import planner
+
+OVERRIDES = {"task_quitting": True, "delta": 1}
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """A planner trained for three epochs on 20 train_small instances with exact labels, handed over to CBGABI."""
+    out = tmp_path_factory.mktemp("planner") / "run"
+    planner.main(["--config", "planner_default", "--scenario", "train_small", "--solver", "exact", "--then", "cbgabi",
+                  "--episodes", "20", "--epochs", "3", "--eval-episodes", "3", "--jobs", "1", "--torch-threads", "1",
+                  "--out-dir", str(out)])
+    return out
+
+
+def test_the_labels_are_the_optimums_paths_on_the_round_0_states_the_oracle_visits():
+    """Every round-0 state where an agent may bid, with the oracle's allowed bids (``OraclePolicy.targets``) as the
+    tasks on its path; the oracle plays the same bids, so the states are the same."""
+    seeds = [3, 4, 5]
+    got = planner.label(("train_small", OVERRIDES, "exact", seeds))
+    env, oracle = TaskAllocEnv("train_small", **OVERRIDES), OraclePolicy()
+    agents, m = env.possible_agents, env.observation_layout.n_tasks
+    obs_rows, allowed_rows, path_rows = [], [], []
+    for seed in seeds:
+        observations, infos = env.reset(seed=seed)
+        oracle.start(env, seed)
+        while env.agents and infos[agents[0]]["round"] == 0:
+            obs, masks = stack_observations(observations, agents)
+            keep = masks[:, 1: m + 1].any(axis=1)
+            obs_rows.append(obs[keep])
+            allowed_rows.append(masks[keep, 1: m + 1] > 0)
+            path_rows.append(oracle.targets(agents, masks.astype(bool))[keep, 1: m + 1])
+            observations, _, _, _, infos = env.step(oracle.act(observations))
+    np.testing.assert_array_equal(got.obs, np.concatenate(obs_rows))
+    np.testing.assert_array_equal(got.allowed, np.concatenate(allowed_rows))
+    np.testing.assert_array_equal(got.on_path, np.concatenate(path_rows))
+    assert got.on_path.any() and (got.allowed & ~got.on_path).any()
+
+
+def test_the_loss_is_the_binary_cross_entropy_over_the_allowed_tasks_only():
+    th.manual_seed(0)
+    actor = PoolingActor(3, 2, 8)
+    obs = th.randn(4, 3 + 5 * 2)
+    allowed = th.rand(4, 5) < 0.6
+    on_path = (th.rand(4, 5) < 0.5) & allowed
+    p = th.sigmoid(planner.bid_log_odds(actor, obs))
+    terms = -(on_path * th.log(p) + (~on_path) * th.log(1 - p))
+    assert planner.plan_loss(actor, obs, allowed, on_path).item() == pytest.approx(
+        (terms[allowed].sum() / allowed.sum()).item(), rel=1e-5)
+    # a task the agent may not bid on does not count, whatever its label
+    assert planner.plan_loss(actor, obs, allowed, on_path | ~allowed).item() == pytest.approx(
+        planner.plan_loss(actor, obs, allowed, on_path).item(), rel=1e-6)
+
+
+def flat_planner(env: TaskAllocEnv, log_odds: float, threshold: float = 0.5) -> RoundZeroPlanner:
+    """A planner whose actor gives every task the same log-odds."""
+    layout = env.observation_layout
+    actor = PoolingActor(layout.own_size, layout.task_size, 8)
+    with th.no_grad():
+        actor.task_head[-1].weight.zero_()
+        actor.task_head[-1].bias.copy_(th.tensor([log_odds, 0.0]))
+    policy = RoundZeroPlanner(actor, layout.own_names, layout.task_names, threshold=threshold)
+    policy.start(env, 0)
+    return policy
+
+
+@pytest.mark.parametrize("log_odds, bids", [(1.0, True), (-1.0, False)])
+def test_it_bids_in_round_0_while_a_task_is_likely_and_passes_in_every_later_round(log_odds, bids):
+    """All tasks equally likely: above the threshold every agent bids on its first allowed task, below it passes;
+    after round 0 it always passes."""
+    env = TaskAllocEnv("train_small", **OVERRIDES)
+    observations, infos = env.reset(seed=7)
+    policy = flat_planner(env, log_odds)
+    rounds_seen = set()
+    while env.agents:
+        actions = policy.act(observations, infos)
+        for agent, obs in observations.items():
+            allowed = np.flatnonzero(obs["action_mask"][1: env.observation_layout.n_tasks + 1])
+            first = infos[agent]["round"] == 0 and bids and len(allowed) > 0
+            assert actions[agent] == (1 + allowed[0] if first else 0)
+        rounds_seen.add(infos[env.agents[0]]["round"])
+        observations, _, _, _, infos = env.step(actions)
+    assert {0, 1} <= rounds_seen
+
+
+def test_a_bad_threshold_is_refused_by_name():
+    env = TaskAllocEnv("train_small")
+    for threshold in (0.0, 1.0, True, "half"):
+        with pytest.raises(ValueError, match="threshold must be a number in"):
+            flat_planner(env, 1.0, threshold)
+
+
+def test_a_short_run_lowers_the_validation_loss_and_saves_a_planner_that_hands_over(trained):
+    with open(trained / "planner.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [int(r["epoch"]) for r in rows] == [0, 1, 2]
+    assert float(rows[-1]["validation_loss"]) < float(rows[0]["validation_loss"])
+    policy = make_policy(f"learned:{trained}")
+    assert isinstance(policy, Handover) and isinstance(policy.first, RoundZeroPlanner)
+    assert policy.then.name == "CBGABI" and policy.rounds == 1 and policy.env_overrides == OVERRIDES
+    env = TaskAllocEnv("train_small", **policy.env_overrides)
+    for seed in (0, 1):
+        allocation = rollout(env, policy, seed=seed)
+        assert allocation.converged and not allocation.conflicts
+
+
+def test_loading_the_planner_again_reproduces_every_action(trained):
+    """Two loads of the checkpoint act identically on every step of whole episodes (the actions also move the env)."""
+    env = TaskAllocEnv("train_small", **OVERRIDES)
+    a, b = make_policy(f"learned:{trained}"), make_policy(f"learned:{trained}")
+    for seed in (2, 3):
+        observations, infos = env.reset(seed=seed)
+        a.start(env, seed)
+        b.start(env, seed)
+        while env.agents:
+            actions = a.act(observations, infos)
+            assert actions == b.act(observations, infos)
+            observations, _, _, _, infos = env.step(actions)
+
+
+def rewritten(trained, tmp_path, **meta):
+    """A copy of the trained checkpoint with its meta changed (None removes a key)."""
+    spec = json.loads((trained / "model.json").read_text())
+    spec["meta"].update(meta)
+    spec["meta"] = {k: v for k, v in spec["meta"].items() if v is not None}
+    (tmp_path / "model.json").write_text(json.dumps(spec))
+    (tmp_path / "model.safetensors").write_bytes((trained / "model.safetensors").read_bytes())
+    return tmp_path
+
+
+@pytest.mark.parametrize("meta, words", [
+    ({"then": None}, ["meta 'then'", "got None"]),
+    ({"then": 3}, ["meta 'then'", "got 3"]),
+    ({"threshold": 1.5}, ["meta 'threshold'", "1.5"]),
+    ({"then": "nosuch"}, ["unknown policy 'nosuch'"]),
+])
+def test_a_planner_checkpoint_with_bad_meta_is_refused_by_name(trained, tmp_path, meta, words):
+    with pytest.raises(ValueError) as exc:
+        make_policy(f"learned:{rewritten(trained, tmp_path, **meta)}")
+    assert all(w in str(exc.value) for w in words), exc.value
+
+
+def test_a_planner_that_hands_over_to_a_planner_is_refused(trained, tmp_path):
+    """A 'then' naming a planner (here itself) would load without end: refused with a clear error."""
+    folder = tmp_path / "self"
+    folder.mkdir()
+    with pytest.raises(CheckpointError, match="is itself a planner"):
+        make_policy(f"learned:{rewritten(trained, folder, then=f'learned:{folder}')}")
+    with pytest.raises(ValueError, match="options \\['deterministic'\\] are not taken"):
+        make_policy(f"learned:{trained}", deterministic=False)
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--solver", "sgama"], ["'solver'", "sgama", "exact | lns"]),
+    (["--threshold", "1"], ["'threshold'", "(0, 1)"]),
+    (["--then", "nosuch"], ["'then'", "unknown policy 'nosuch'"]),
+    (["--episodes", "0"], ["'episodes'", ">= 1"]),
+])
+def test_a_bad_planner_config_is_one_line_and_exit_2(argv, words, tmp_path, capsys):
+    assert run_cli(lambda: planner.main(["--config", "planner_default", "--out-dir", str(tmp_path / "run"),
+                                         *argv])) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ")
+    assert all(w in err[0] for w in words), err[0]
+    assert not (tmp_path / "run").exists()

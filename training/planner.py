@@ -1,0 +1,244 @@
+"""Learning the round-0 plan: supervised, from solver labels (ours; the local plan of ``policies.local_plan`` learned).
+
+    python -m training.planner --config planner_default --seed 0 --out-dir runs/planner_default/seed0
+
+Before any message (round 0, thesis Alg 5) an agent knows its own start, speed and equipment and the tasks, not
+where its teammates are. ``policies.local_plan`` plans its first bundle by solving teams drawn around its own start;
+this run learns that plan instead. It draws training instances (seeds 100000 + 100000 · seed + k), solves each
+(``solver``: the exact optimum, or the group search ``policies.local_search`` with ``LNS_ITERATIONS`` per start at
+sizes ``exact`` cannot reach), plays round 0 with every agent bidding along its path of that allocation
+(``policies.oracle.bid_along``) and keeps every round-0 state in which the agent may bid: its observation, the
+tasks it may bid on and which of them are on its path. The actor's bid logits are fitted as per-task log-odds with
+binary cross-entropy over the allowed tasks, so the network estimates, from what the agent sees, the probability
+that a task is on its path, the share the local plan estimates by sampling. Play (``policies.round_zero``): bid
+the most likely allowed task while that probability is ≥ ``threshold``, then hand over to ``then`` (by default the
+committed MAPPO bidder) from round 1 on.
+
+The run writes ``model.json`` + ``model.safetensors`` (``learned:<out_dir>`` plays the planner, then ``then``),
+``planner.csv`` (one row per epoch: training and validation loss), ``config.yaml`` and ``summary.yaml`` (the
+validation scores of the planner then ``then``, of ``then`` alone and of CBGABI).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import os
+import resource
+import sys
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import torch as th
+import yaml
+from torch import nn
+
+from evaluation.episodes import evaluate
+from evaluation.pool import parallel_map
+from evaluation.seeds import DEMO_SEED_START, VALIDATION_SEED_START
+from policies import checkpoint, make_policy
+from policies.base import stack_observations
+from policies.local_plan import SOLVERS
+from policies.oracle import bid_along
+from policies.round_zero import PLANNER
+from taskalloc_env.config import resolve_config
+from taskalloc_env.env import TaskAllocEnv
+from taskalloc_env.errors import ConfigError, run_cli
+from training.config import check_at_least, check_protocol_options, check_types, opt, parse, plain, prepare_out_dir
+from training.mappo import check_actor, make_actor
+
+COLUMNS = ("epoch", "loss", "validation_loss", "wall_time")
+MAX_GRAD_NORM = 1.0
+CHUNK = 50          # instances per labelling task
+
+
+@dataclasses.dataclass
+class PlannerConfig:
+    """Everything a run needs; the resolved copy is saved as ``config.yaml`` next to the model."""
+
+    name: str = opt("planner", "run name: the default output folder is runs/<name>-<date-time>")
+    out_dir: str | None = opt(None, "folder for the model, config, table and summary")
+    overwrite: bool = opt(False, "replace a model already in out_dir")
+    seed: int = opt(0, "seed of torch and of the training instances (100000 + 100000 · seed + k)")
+    scenario: str = opt("default", "the scenario the plans are learned on")
+    env_overrides: dict[str, Any] = dataclasses.field(
+        default_factory=lambda: {"task_quitting": True, "delta": 1},
+        metadata={"help": "protocol options the planner and its successor play with, saved in the checkpoint"})
+    solver: str = opt("lns", "the labels' solver: exact (small scenarios) | lns (policies.local_plan.lns_draw)")
+    then: str = opt("learned:mappo_small_pooling_1m", "the policy that takes over from round 1 on")
+    threshold: float = opt(0.5, "bid while the most likely allowed task's probability is at least this")
+    actor: str = opt("pooling", "actor network: attention | pooling (policies.networks)")
+    hidden: int = opt(64, "width of the actor")
+    heads: int = opt(4, "attention heads")
+    layers: int = opt(2, "self-attention layers")
+    episodes: int = opt(8000, "training instances")
+    epochs: int = opt(30, "passes over the data set")
+    batch_size: int = opt(256, "minibatch size")
+    learning_rate: float = opt(1e-3, "Adam learning rate")
+    eval_episodes: int = opt(40, "validation instances (their states give the validation loss; played at the end)")
+    jobs: int = opt(2, "processes that label instances")
+    torch_threads: int = opt(2, "torch threads")
+
+    def check(self) -> None:
+        check_types(self)
+        check_at_least(self, ("hidden", "heads", "layers", "episodes", "epochs", "batch_size", "eval_episodes",
+                              "jobs", "torch_threads"), 1)
+        check_at_least(self, ("seed",), 0)
+        check_actor(self)
+        check_protocol_options(self)
+        if self.solver not in SOLVERS:
+            raise ConfigError(f"training field 'solver': got {self.solver!r}; allowed: {' | '.join(SOLVERS)}")
+        if not 0 < self.threshold < 1:
+            raise ConfigError(f"training field 'threshold': got {self.threshold!r}; allowed: a number in (0, 1)")
+        if self.learning_rate <= 0:
+            raise ConfigError(f"training field 'learning_rate': got {self.learning_rate!r}; allowed: a number > 0")
+
+
+@dataclasses.dataclass
+class Plans:
+    """Round-0 states in which an agent may bid: observation, the tasks it may bid on, those on its path."""
+
+    obs: np.ndarray         # (S, D) float32
+    allowed: np.ndarray     # (S, M) bool
+    on_path: np.ndarray     # (S, M) bool, a subset of allowed
+
+    @classmethod
+    def concat(cls, parts: Sequence[Plans]) -> Plans:
+        return cls(*(np.concatenate(arrays) for arrays in zip(*(dataclasses.astuple(p) for p in parts))))
+
+
+def label(job: tuple[str, dict[str, Any], str, Sequence[int]]) -> Plans:
+    """The round-0 states of ``seeds`` with every agent bidding along its path of ``solver``'s allocation."""
+    scenario, overrides, solver, seeds = job
+    env = TaskAllocEnv(resolve_config(scenario), **overrides)
+    agents, m = env.possible_agents, env.observation_layout.n_tasks
+    round_column = env.observation_layout.own_names.index("round")
+    parts = []
+    for seed in seeds:
+        observations, _ = env.reset(seed=int(seed))
+        paths = SOLVERS[solver](env.scenario, env.config).paths
+        on_path = np.zeros((len(agents), m), dtype=bool)
+        for i, path in enumerate(paths):
+            on_path[i, list(path)] = True
+        while env.agents:
+            obs, masks = stack_observations(observations, agents)
+            if obs[0, round_column] > 0:
+                break
+            allowed = masks[:, 1: m + 1] > 0
+            rows = allowed.any(axis=1)
+            parts.append(Plans(obs[rows].astype(np.float32), allowed[rows], (on_path & allowed)[rows]))
+            observations, *_ = env.step({a: bid_along(paths[env.agent_index[a]], observations[a]["action_mask"])
+                                         for a in agents})
+    return Plans.concat(parts)
+
+
+def labelled(cfg: PlannerConfig, seeds: Sequence[int]) -> Plans:
+    """``label`` over chunks of ``seeds`` in ``cfg.jobs`` processes, in seed order."""
+    chunks = [(cfg.scenario, dict(cfg.env_overrides), cfg.solver, list(seeds[k: k + CHUNK]))
+              for k in range(0, len(seeds), CHUNK)]
+    return Plans.concat(list(parallel_map(label, chunks, cfg.jobs)))
+
+
+def bid_log_odds(actor: nn.Module, obs: th.Tensor) -> th.Tensor:
+    """(B, M) the actor's bid logits with every action unmasked: the log-odds that each task is on the path."""
+    m = (obs.shape[1] - actor.own_size) // actor.task_size
+    return actor(obs, th.ones(len(obs), 1 + 2 * m, dtype=th.bool))[:, 1: 1 + m]
+
+
+def plan_loss(actor: nn.Module, obs: th.Tensor, allowed: th.Tensor, on_path: th.Tensor) -> th.Tensor:
+    """Binary cross-entropy of the bid log-odds against membership of the path, over the allowed tasks."""
+    losses = nn.functional.binary_cross_entropy_with_logits(bid_log_odds(actor, obs), on_path.float(),
+                                                            reduction="none")
+    return (losses * allowed).sum() / allowed.sum()
+
+
+def tensors(data: Plans) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
+    return th.as_tensor(data.obs), th.as_tensor(data.allowed), th.as_tensor(data.on_path)
+
+
+def fit_epoch(actor: nn.Module, optimizer: th.optim.Optimizer, data: tuple[th.Tensor, ...], batch_size: int,
+              rng: np.random.Generator) -> float:
+    """One pass over ``data`` in random minibatches; the mean loss per allowed task."""
+    obs, allowed, on_path = data
+    total, weight = 0.0, 0.0
+    order = rng.permutation(len(obs))
+    for start in range(0, len(obs), batch_size):
+        idx = th.as_tensor(order[start: start + batch_size])
+        loss = plan_loss(actor, obs[idx], allowed[idx], on_path[idx])
+        optimizer.zero_grad()
+        loss.backward()
+        nn.utils.clip_grad_norm_(actor.parameters(), MAX_GRAD_NORM)
+        optimizer.step()
+        n = float(allowed[idx].sum())
+        total, weight = total + loss.item() * n, weight + n
+    return total / weight
+
+
+def cpu_seconds() -> float:
+    """CPU time of this process and of the labelling processes it waited for."""
+    return sum(u.ru_utime + u.ru_stime for u in (resource.getrusage(resource.RUSAGE_SELF),
+                                                    resource.getrusage(resource.RUSAGE_CHILDREN)))
+
+
+def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
+    cfg = parse(PlannerConfig, argv, "python -m training.planner", __doc__)
+    cfg.out_dir = cfg.out_dir or f"runs/{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    cfg.check()
+    try:
+        then = make_policy(cfg.then)
+    except ValueError as exc:      # a CheckpointError is a ConfigError already
+        raise ConfigError(f"training field 'then': {exc}") from None
+    out_dir = prepare_out_dir(cfg.out_dir, cfg.overwrite)
+    (out_dir / "config.yaml").write_text(yaml.safe_dump(dataclasses.asdict(cfg), sort_keys=False))
+    th.set_num_threads(cfg.torch_threads)
+    th.manual_seed(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
+    t0, load = time.perf_counter(), round(os.getloadavg()[0], 2)
+
+    first = DEMO_SEED_START + 100_000 * cfg.seed
+    train = labelled(cfg, range(first, first + cfg.episodes))
+    val_seeds = range(VALIDATION_SEED_START, VALIDATION_SEED_START + cfg.eval_episodes)
+    val = tensors(labelled(cfg, val_seeds))
+    label_seconds = time.perf_counter() - t0
+    print(f"{len(train.obs)} round-0 states from {cfg.episodes} instances ({label_seconds:.0f} s), "
+          f"{train.on_path.sum() / train.allowed.sum():.3f} of the allowed tasks on the path", flush=True)
+
+    layout = TaskAllocEnv(resolve_config(cfg.scenario), **cfg.env_overrides).observation_layout
+    actor = make_actor(cfg, layout.own_size, layout.task_size)
+    optimizer = th.optim.Adam(actor.parameters(), lr=cfg.learning_rate)
+    data = tensors(train)
+    with open(out_dir / "planner.csv", "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(COLUMNS)
+        for epoch in range(cfg.epochs):
+            actor.train()
+            loss = fit_epoch(actor, optimizer, data, cfg.batch_size, rng)
+            actor.eval()
+            with th.no_grad():
+                val_loss = plan_loss(actor, *val).item()
+            writer.writerow([epoch, f"{loss:.6g}", f"{val_loss:.6g}", round(time.perf_counter() - t0, 1)])
+            fh.flush()
+            print(f"epoch {epoch}: loss {loss:.4f}, validation loss {val_loss:.4f}", flush=True)
+
+    meta = {"name": cfg.name, "algo": PLANNER, "seed": cfg.seed, "scenario": cfg.scenario, "solver": cfg.solver,
+            "then": cfg.then, "threshold": cfg.threshold}
+    checkpoint.save(out_dir / "model", actor, layout.own_names, layout.task_names, cfg.env_overrides, meta)
+    env_kwargs = {"scenario": resolve_config(cfg.scenario)}
+    scores = {label: float(np.mean([a.score for a in evaluate(policy, env_kwargs, val_seeds)]))
+              for label, policy in (("planner_then", make_policy(f"learned:{out_dir}")), ("then", then),
+                                    ("cbgabi", make_policy("cbgabi")))}
+    summary = {"command": " ".join(["python -m training.planner", *(argv if argv is not None else sys.argv[1:])]),
+               "wall_seconds": round(time.perf_counter() - t0, 1), "cpu_seconds": round(cpu_seconds(), 1),
+               "label_seconds": round(label_seconds, 1), "load_average_at_start": load, "cpu_count": os.cpu_count(),
+               "states": len(train.obs), "validation_loss": val_loss,
+               "validation_scores": scores, "validation_ratio_cbgabi": scores["planner_then"] / scores["cbgabi"]}
+    (out_dir / "summary.yaml").write_text(yaml.safe_dump(plain(summary), sort_keys=False))
+    print(f"validation ({cfg.eval_episodes} instances): planner then {cfg.then} {scores['planner_then']:.1f}, "
+          f"{cfg.then} alone {scores['then']:.1f}, CBGABI {scores['cbgabi']:.1f}", flush=True)
+    return summary
+
+
+if __name__ == "__main__":
+    raise SystemExit(run_cli(main))
