@@ -90,7 +90,8 @@ LOSS = Config("MAPPO attention, trained under 20 % loss", "mappo_loss")
 LOSS_POOLING = Config("MAPPO pooling, trained under 20 % loss", "mappo_loss_pooling")
 MIXTURE_POOLING = Config("MAPPO pooling, curriculum 4×8 → 10×20", "mappo_mixture_pooling")
 DELAY_POOLING = Config("MAPPO pooling, trained under message delay (0–2 rounds)", "mappo_delay_pooling")
-PLANNER = Config("round-0 planner learned from LNS on 10 × 20 (ours), then MAPPO pooling 1 M", "planner_default")
+PLANNER = Config("round-0 planner learned from LNS on 10 × 20 (ours), then MAPPO pooling 1 M", "planner_default",
+                 {0: "planner_default"})
 
 
 @dataclasses.dataclass(frozen=True)

@@ -183,3 +183,11 @@ def test_a_bad_planner_config_is_one_line_and_exit_2(argv, words, tmp_path, caps
     assert len(err) == 1 and err[0].startswith("error: ")
     assert all(w in err[0] for w in words), err[0]
     assert not (tmp_path / "run").exists()
+
+
+def test_the_committed_planner_loads_by_name_and_hands_over_to_the_committed_bidder():
+    policy = make_policy("learned:planner_default")
+    assert isinstance(policy.first, RoundZeroPlanner) and policy.then.name == "learned:mappo_small_pooling_1m"
+    env = TaskAllocEnv("default", **policy.env_overrides)
+    allocation = rollout(env, policy, seed=10_000)
+    assert allocation.converged and not allocation.conflicts and allocation.score > 0
