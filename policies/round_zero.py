@@ -22,23 +22,27 @@ from policies.learned import LearnedPolicy
 PLANNER = "round0-planner"      # the checkpoint's meta["algo"] of a planner
 
 
+def is_threshold(value: Any) -> bool:
+    """A probability threshold a planner can bid by: a number strictly between 0 and 1."""
+    return not isinstance(value, bool) and isinstance(value, (int, float)) and 0 < value < 1
+
+
 class RoundZeroPlanner(LearnedPolicy):
     """Round 0: bids on the allowed task most likely on its path while that probability is ≥ ``threshold``;
     later rounds: passes. The actor's bid logits are read as per-task log-odds (``training.planner``)."""
 
     def __init__(self, *args: Any, threshold: float = 0.5, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not 0 < threshold < 1:
+        if not is_threshold(threshold):
             raise ValueError(f"{self.name}: threshold must be a number in (0, 1), got {threshold!r}")
         self.threshold = float(threshold)
 
     def probabilities(self, obs: np.ndarray) -> np.ndarray:
         """(B, M) the probability that each task is on the agent's path, from the actor's observations (B, D)."""
-        from policies.networks import masked_logits
+        import torch as th
 
-        m = self.layout.n_tasks
-        every = np.ones((len(obs), 1 + 2 * m), dtype=bool)     # the log-odds of every task, allowed or not
-        return 1.0 / (1.0 + np.exp(-masked_logits(self.actor, obs, every).numpy()[:, 1: m + 1].astype(np.float64)))
+        with th.no_grad():
+            return th.sigmoid(bid_log_odds(self.actor, th.as_tensor(obs, dtype=th.float32))).numpy().astype(np.float64)
 
     def decide(self, obs: np.ndarray, masks: np.ndarray) -> np.ndarray:
         m = self.layout.n_tasks
@@ -49,12 +53,21 @@ class RoundZeroPlanner(LearnedPolicy):
         return np.where(bid, 1 + best, 0)
 
 
+def bid_log_odds(actor: Any, obs: Any) -> Any:
+    """(B, M) tensor: the actor's bid logits with every action unmasked, read as the log-odds that each task is on
+    the agent's path (what ``training.planner`` fits), for observations (B, D) as a tensor."""
+    import torch as th
+
+    m = (obs.shape[1] - actor.own_size) // actor.task_size
+    return actor(obs, th.ones(len(obs), 1 + 2 * m, dtype=th.bool))[:, 1: 1 + m]
+
+
 def planner_meta(checkpoint: Checkpoint, where: str) -> tuple[str, float]:
     """(``then``, ``threshold``) from a planner checkpoint's meta, each checked."""
     then, threshold = checkpoint.meta.get("then"), checkpoint.meta.get("threshold", 0.5)
     if not isinstance(then, str) or not then:
         raise CheckpointError(f"{where}: a planner checkpoint names the policy that takes over in meta 'then' (a "
                               f"policy name), got {then!r}")
-    if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not 0 < threshold < 1:
+    if not is_threshold(threshold):
         raise CheckpointError(f"{where}: meta 'threshold' must be a number in (0, 1), got {threshold!r}")
     return then, float(threshold)

@@ -369,3 +369,15 @@ def typed(types: list[str], required: dict[str, int]) -> Equipment:
     agent_eq = np.array([[t == name for name in names] for t in types], dtype=bool)
     task_eq = np.array([[required.get(name, 0) for name in names]], dtype=np.int64)
     return Equipment(agent_eq, task_eq)
+
+
+def assert_same_actions(env: TaskAllocEnv, a, b, seeds: Sequence[int]) -> None:
+    """Policies ``a`` and ``b`` take the same actions on every step of whole episodes (``a``'s actions are played)."""
+    for seed in seeds:
+        observations, infos = env.reset(seed=seed)
+        a.start(env, seed)
+        b.start(env, seed)
+        while env.agents:
+            actions = a.act(observations, infos)
+            assert actions == b.act(observations, infos)
+            observations, _, _, _, infos = env.step(actions)

@@ -9,6 +9,7 @@ pytest.importorskip("stable_baselines3")
 pytest.importorskip("sb3_contrib")
 
 import torch as th
+from helpers import assert_same_actions
 from sb3_contrib import MaskablePPO
 
 from policies import make_policy, rollout
@@ -102,15 +103,7 @@ def test_save_load_round_trip(tmp_path, perturbed_model):
     assert loaded.meta == {"note": "test"}
     # the loaded policy takes the original's actions, step by step, over whole episodes (invalid_action="raise")
     env = TaskAllocEnv("train_small", invalid_action="raise", **loaded.env_overrides)
-    original = learned(perturbed_model)
-    for seed in range(10_000, 10_003):
-        obs, infos = env.reset(seed=seed)
-        loaded.start(env, seed)
-        original.start(env, seed)
-        while env.agents:
-            actions = loaded.act(obs, infos)
-            assert actions == original.act(obs, infos)
-            obs, _, _, _, infos = env.step(actions)
+    assert_same_actions(env, loaded, learned(perturbed_model), range(10_000, 10_003))
     # a pooling checkpoint also plays a scenario with more agents and tasks, to convergence, within its masks
     big = TaskAllocEnv("train_small", n_agents=6, n_tasks=12, invalid_action="raise", **loaded.env_overrides)
     assert rollout(big, loaded, seed=1).converged

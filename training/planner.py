@@ -42,7 +42,7 @@ from policies import checkpoint, make_policy
 from policies.base import stack_observations
 from policies.local_plan import SOLVERS
 from policies.oracle import bid_along
-from policies.round_zero import PLANNER
+from policies.round_zero import PLANNER, bid_log_odds, is_threshold
 from taskalloc_env.config import resolve_config
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
@@ -90,7 +90,7 @@ class PlannerConfig:
         check_protocol_options(self)
         if self.solver not in SOLVERS:
             raise ConfigError(f"training field 'solver': got {self.solver!r}; allowed: {' | '.join(SOLVERS)}")
-        if not 0 < self.threshold < 1:
+        if not is_threshold(self.threshold):
             raise ConfigError(f"training field 'threshold': got {self.threshold!r}; allowed: a number in (0, 1)")
         if self.learning_rate <= 0:
             raise ConfigError(f"training field 'learning_rate': got {self.learning_rate!r}; allowed: a number > 0")
@@ -139,12 +139,6 @@ def labelled(cfg: PlannerConfig, seeds: Sequence[int]) -> Plans:
     chunks = [(cfg.scenario, dict(cfg.env_overrides), cfg.solver, list(seeds[k: k + CHUNK]))
               for k in range(0, len(seeds), CHUNK)]
     return Plans.concat(list(parallel_map(label, chunks, cfg.jobs)))
-
-
-def bid_log_odds(actor: nn.Module, obs: th.Tensor) -> th.Tensor:
-    """(B, M) the actor's bid logits with every action unmasked: the log-odds that each task is on the path."""
-    m = (obs.shape[1] - actor.own_size) // actor.task_size
-    return actor(obs, th.ones(len(obs), 1 + 2 * m, dtype=th.bool))[:, 1: 1 + m]
 
 
 def plan_loss(actor: nn.Module, obs: th.Tensor, allowed: th.Tensor, on_path: th.Tensor) -> th.Tensor:
