@@ -7,10 +7,18 @@
 #   TORCH_VERSION   (default 2.13.0)
 #   TORCH_INDEX_URL (e.g. https://download.pytorch.org/whl/cpu for the CPU-only wheels; default: pip's own index)
 # After the install the script checks that no CUDA packages (nvidia-*) came in, and fails if they did.
+# A second run with pyproject.toml, this script and the torch choice unchanged does nothing (.venv/.setup-stamp;
+# delete it to install again).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PYTHON="${PYTHON:-python3}"
 TORCH_VERSION="${TORCH_VERSION:-2.13.0}"
+# what the installed .venv was set up from: when none of it changed since, there is nothing to do (the edit-test loop)
+STAMP=".venv/.setup-stamp"
+wanted=$(cat pyproject.toml scripts/setup.sh | sha256sum | cut -d' ' -f1)-$TORCH_VERSION-${TORCH_INDEX_URL:-}
+if [ -x .venv/bin/python ] && [ "$(cat "$STAMP" 2>/dev/null)" = "$wanted" ]; then
+  exit 0
+fi
 if [ ! -x .venv/bin/python ]; then
   "$PYTHON" -m venv .venv
 fi
@@ -30,3 +38,4 @@ if [ -n "$cuda" ]; then
   echo "setup: remove .venv and set TORCH_INDEX_URL=https://download.pytorch.org/whl/cpu for the CPU build" >&2
   exit 1
 fi
+echo "$wanted" > "$STAMP"

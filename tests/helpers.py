@@ -21,6 +21,15 @@ from taskalloc_env.knowledge import LocalKnowledge
 
 TOL = 1e-9
 
+# set by conftest.pytest_configure before the test modules are collected: True for the fast subset (-m "not slow")
+FAST_SUBSET = False
+
+
+def examples(full: int) -> int:
+    """Examples a property test draws: ``full`` in the whole suite (CI), a twentieth (at least 10) in the fast
+    subset, so the edit-test loop stays under a minute while CI keeps every example."""
+    return max(10, full // 20) if FAST_SUBSET else full
+
 
 # ---------------------------------------------------------------------------------------------------------------
 # Reference path timing and score (thesis (3.7)–(3.10); prereq_timing, our choice)

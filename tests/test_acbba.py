@@ -42,10 +42,12 @@ def test_acbba_check_on_a_thousand_scenarios():
     assert ok, text
 
 
-@pytest.mark.parametrize("faults", [{"message_loss": 0.2, "max_delay": 3}, {"message_loss": 0.2},
-                                    {"loss_model": "gilbert_elliott", "message_loss": 0.02, "burst_enter": 0.1,
-                                     "burst_leave": 0.4}, {"max_delay": 5}],
-                         ids=["loss+delay", "loss", "bursts", "delay"])
+@pytest.mark.parametrize("faults", [
+    {"message_loss": 0.2, "max_delay": 3},                     # both at once: the fast subset's case
+    pytest.param({"message_loss": 0.2}, marks=pytest.mark.slow),
+    pytest.param({"loss_model": "gilbert_elliott", "message_loss": 0.02, "burst_enter": 0.1, "burst_leave": 0.4},
+                 marks=pytest.mark.slow),
+    pytest.param({"max_delay": 5}, marks=pytest.mark.slow)], ids=["loss+delay", "loss", "bursts", "delay"])
 def test_under_loss_and_delay_acbba_still_converges_conflict_free(faults):
     text, ok = acbba_check.report(acbba_check.run_checks(30, faults, jobs=1))
     assert ok, text

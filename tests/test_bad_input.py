@@ -220,6 +220,7 @@ def test_compare_refuses_an_existing_output_folder(tmp_path):
     assert result.stdout == "" and _snapshot(out) == before
 
 
+@pytest.mark.slow
 def test_compare_overwrites_when_asked(tmp_path, capsys):
     out = tmp_path / "compare"
     out.mkdir()
@@ -266,6 +267,7 @@ def test_experiment_run_with_a_bad_file_is_one_line_and_exit_2(case, tmp_path, c
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_experiment_run_refuses_existing_results_and_docs(tmp_path):
     path = tmp_path / "tiny.yaml"
     path.write_text(EXPERIMENT)
@@ -281,6 +283,7 @@ def test_experiment_run_refuses_existing_results_and_docs(tmp_path):
     assert _snapshot(tmp_path) == before and not (tmp_path / "new").exists()
 
 
+@pytest.mark.slow
 def test_experiment_run_overwrites_when_asked(tmp_path):
     path = tmp_path / "tiny.yaml"
     path.write_text(EXPERIMENT)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import csv
 
+import pytest
+
 from policies.__main__ import main
 
 BASELINE_ROWS = ("random", "CBGA", "CBGA+TQ", "CBGA+TB", "CBGABI", "SGAMA", "LNS")
@@ -14,6 +16,7 @@ def _table_rows(text: str) -> dict[str, list[str]]:
     return {cells[0]: cells[1:] for cells in ([c.strip() for c in line.strip("|").split("|")] for line in lines)}
 
 
+@pytest.mark.slow
 def test_compare_prints_every_baseline_on_the_default_scenario(capsys):
     assert main(["compare", "--scenario", "default", "--episodes", "2", "--no-learned"]) == 0
     out = capsys.readouterr().out
@@ -32,6 +35,7 @@ def test_cbba_row_appears_when_every_task_needs_one_agent(capsys):
     assert set(rows) == {*BASELINE_ROWS, "CBBA"}
 
 
+@pytest.mark.slow
 def test_compare_is_deterministic_and_writes_table_and_plot(tmp_path, capsys):
     argv = ["compare", "--episodes", "3", "--set", "n_agents=5", "--set", "n_tasks=8", "--no-learned"]
     main([*argv, "--out", str(tmp_path)])
@@ -49,6 +53,7 @@ def test_compare_is_deterministic_and_writes_table_and_plot(tmp_path, capsys):
     assert len({(r["seed"], r["instance"]) for r in episodes}) == 3   # paired: one instance per seed
 
 
+@pytest.mark.slow
 def test_missing_learned_checkpoint_is_skipped_with_a_note(tmp_path, capsys):
     main(["compare", "--episodes", "2", "--set", "n_agents=4", "--set", "n_tasks=6",
           "--learned", str(tmp_path / "run" / "model.zip")])

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import helpers
 import numpy as np
-from helpers import draw_group_setup, typed
+from helpers import draw_group_setup, examples, typed
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -190,7 +190,7 @@ def merge_inputs(draw):
     return table(), table(), receivers, senders, s_i, s_k, required, Equipment(agent_eq, task_eq)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(merge_inputs())
 def test_merge_properties(inputs):
     """Capacity (thesis (3.4)), entries come from one of the two views, the receiver's row only shrinks, same-type

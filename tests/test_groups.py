@@ -12,6 +12,7 @@ import functools
 
 import numpy as np
 import pytest
+from helpers import examples
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -53,7 +54,7 @@ def tables(draw):
 @pytest.mark.filterwarnings("ignore:tasks .* are identical")     # identical tasks are drawn on purpose
 @pytest.mark.parametrize("mask", ["reference", "compiled"])
 @pytest.mark.parametrize("outbid_ties", ["higher_id", "strict"])
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(tables(), st.data())
 def test_bid_mask_and_merge_admit_the_same_bids(mask, outbid_ties, case, data):
     """Under ``higher_id`` the mask and the merge decide every bid alike; under ``strict`` (the bundle phase's ">")

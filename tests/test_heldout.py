@@ -4,10 +4,12 @@ SGAMA ≤ LNS ≤ the exact optimum, and its markdown measured against CBGABI an
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from evaluation import heldout
 
 
+@pytest.mark.slow
 def test_the_quick_table_orders_the_centralised_rows_and_reads_them_against_cbgabi():
     seeds = [10000, 10001, 10002]
     rows = heldout.run_rows("train_small", seeds, learned=[])

@@ -7,6 +7,7 @@ import os
 
 import numpy as np
 import pytest
+from helpers import examples
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -74,7 +75,7 @@ def clone(kn: LocalKnowledge) -> LocalKnowledge:
                           kn.quit.copy(), kn.quit_blocked.copy(), kn.single.copy())
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(rounds())
 def test_compiled_exchange_equals_the_reference(case):
     kn, snaps, deliveries, need, equipment, table = case
@@ -88,7 +89,7 @@ def test_compiled_exchange_equals_the_reference(case):
         np.testing.assert_array_equal(getattr(compiled, name), getattr(reference, name), err_msg=name)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(st.integers(1, 5), st.lists(st.integers(1, 4), min_size=1, max_size=5), st.integers(0, 2**32 - 1))
 def test_compiled_group_writes_equal_the_reference(n, capacity, seed):
     """Random joins, re-bids and withdrawals (some of them beyond L_j) on two tables, one written by
@@ -110,7 +111,7 @@ def test_compiled_group_writes_equal_the_reference(n, capacity, seed):
             np.testing.assert_array_equal(getattr(compiled, name), getattr(reference, name), err_msg=name)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(st.integers(1, 5), st.lists(st.integers(1, 4), min_size=1, max_size=5), st.integers(0, 2**32 - 1))
 def test_compiled_joined_equals_the_reference(n, capacity, seed):
     """A table before and after random joins, re-bids and withdrawals: ``kernels.table.joined_members`` and
@@ -147,7 +148,7 @@ def planning_cases(draw):
     return ScoringModel(scenario, **options), paths
 
 
-@settings(max_examples=400, deadline=None)
+@settings(max_examples=examples(400), deadline=None)
 @given(planning_cases())
 def test_compiled_plan_equals_the_reference(case):
     """Timing, feasibility and best slots agree exactly; values to the last bits of exp (see kernels/plan.py)."""
@@ -217,7 +218,7 @@ def score_tables(draw):
 
 
 @pytest.mark.filterwarnings("ignore:tasks .* are identical")
-@settings(max_examples=400, deadline=None)
+@settings(max_examples=examples(400), deadline=None)
 @given(score_tables())
 def test_compiled_team_score_equals_the_reference(case):
     """Paid members, valid tasks, conflicts and the score agree exactly with the numpy lines (``kernels/score.py``)."""
@@ -255,7 +256,7 @@ def views(draw):
 
 
 @pytest.mark.filterwarnings("ignore:tasks .* are identical")
-@settings(max_examples=400, deadline=None)
+@settings(max_examples=examples(400), deadline=None)
 @given(views())
 def test_compiled_view_rows_equal_the_reference(case):
     """All rows from scratch, and one row refreshed after only that row's table changed, equal ``bid_view``."""
@@ -284,7 +285,7 @@ def test_compiled_view_rows_equal_the_reference(case):
     same(refresh_rows(first, [row], kn, *args, **options), bid_view(kn, *args, **options))
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(st.integers(1, 5), st.integers(1, 7), st.sampled_from(["cbga", "cbga+tb", "cbga+tq", "cbgabi", "cbba"]),
        st.sampled_from(["net", "literal"]), st.sampled_from([np.float32, np.float64]), st.integers(0, 2**32 - 1))
 def test_compiled_rule_equals_the_reference(n, m, name, team_value, dtype, seed):

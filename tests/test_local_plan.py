@@ -23,6 +23,7 @@ def bound(env: TaskAllocEnv, seed: int, samples: int = 4, solver: str = "exact")
     return policy
 
 
+@pytest.mark.slow
 def test_the_plan_does_not_depend_on_where_the_teammates_are():
     """Each agent's shares are the same when its teammates start elsewhere, although the optimum moves with them."""
     env = TaskAllocEnv("train_small")
@@ -55,6 +56,7 @@ def test_alone_it_plans_its_solvers_path_and_reaches_its_score(solver):
         assert rollout(env, policy, seed=seed).score == pytest.approx(best.score, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_it_bids_only_in_round_0_and_then_passes():
     env = TaskAllocEnv("train_small")
     policy = LocalPlanPolicy(4)
@@ -69,6 +71,7 @@ def test_it_bids_only_in_round_0_and_then_passes():
     assert any(acted[0]) and not any(acted[1])
 
 
+@pytest.mark.slow
 def test_its_plans_are_reused_for_the_same_instance_and_drawn_again_for_another():
     env = TaskAllocEnv("train_small")
     policy = bound(env, 10_000)
@@ -104,6 +107,7 @@ def test_with_the_lns_reference_the_command_line_plays_at_the_default_size():
     assert labels == ["LNS", "cbgabi", "local plan (1 draws, lns) for round 0, then cbgabi"]
 
 
+@pytest.mark.slow
 def test_the_local_plan_then_cbgabi_plays_valid_actions_on_many_instances():
     policy = Handover(LocalPlanPolicy(2), make_policy("cbgabi"), 1)
     env = TaskAllocEnv("train_small", **policy.env_overrides)

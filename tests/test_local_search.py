@@ -23,6 +23,7 @@ from taskalloc_env.scenario import scenario_config as config_of
 
 
 @given(kw=scenario_config(), seed=st.integers(0, 2**16))
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 def test_the_search_is_feasible_and_lies_between_sgama_and_the_optimum(kw, seed):
     env = TaskAllocEnv(**kw)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import helpers
 import numpy as np
-from helpers import draw_group_setup, typed
+from helpers import draw_group_setup, examples, typed
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -213,7 +213,7 @@ def stamped_inputs(draw):
     return bids_i, t_i, bids_k, t_k, receivers, required, Equipment(agent_eq, task_eq)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(stamped_inputs())
 def test_merge_stamped_properties(inputs):
     """Capacity ((3.4)), the receiver's own row, newer-replaces-older, the origin of every value and time, equipment
@@ -259,7 +259,7 @@ def test_merge_stamped_properties(inputs):
         np.testing.assert_array_equal(alone_t[0], out_t[q])
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(stamped_inputs())
 def test_merging_a_column_with_itself_changes_nothing(inputs):
     bids_i, t_i, _, _, receivers, required, eq = inputs

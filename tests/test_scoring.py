@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 import pytest
-from helpers import agent, build, reference_gain, reference_team_score, replay, task
+from helpers import agent, build, examples, reference_gain, reference_team_score, replay, task
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -204,7 +204,7 @@ def random_paths(draw):
     return s, path, options, marginal
 
 
-@settings(max_examples=120, deadline=None)
+@settings(max_examples=examples(120), deadline=None)
 @given(random_paths())
 def test_insertion_gains_match_brute_force(case):
     """The vectorised (3.11) equals the best feasible insertion found by replaying every slot."""
@@ -230,7 +230,7 @@ def test_insertion_gains_match_brute_force(case):
             assert slot[j] == -1
 
 
-@settings(max_examples=80, deadline=None)
+@settings(max_examples=examples(80), deadline=None)
 @given(random_paths(), st.data())
 def test_frozen_from_start_gains_are_dmg(case, data):
     """DMG (Johnson (3.13)): with frozen times and the start-distance cost, inserting another task m never
@@ -354,7 +354,7 @@ def test_team_score_matches_reference_on_generated_scenarios():
             assert set(np.flatnonzero(ts.valid).tolist()) == valid
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(st.integers(1, 12), st.integers(1, 12), st.integers(0, 2**32 - 1), st.sampled_from([1e-3, 1.0, 1e3]))
 def test_distances_are_numpys_norm_bit_for_bit(n, m, seed, scale):
     rng = np.random.default_rng(seed)
