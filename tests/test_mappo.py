@@ -159,7 +159,8 @@ def test_a_mixture_needs_one_feature_set(tmp_path):
 
 
 # A variant of train_small where the choice of task matters more (3 agents, start times within 10 min): uniform
-# random play reaches about 90 % of CBGABI here (321 against 356 on the 24 validation seeds), against 94 % on train_small (as in test_training_smoke).
+# random play reaches about 90 % of CBGABI here (321 against 356 on the 24 validation seeds), against 94 % on
+# train_small (as in test_training_smoke).
 HARD = {"n_agents": 3, "start_time_range": [0.0, 10.0]}
 
 
