@@ -24,13 +24,21 @@ from training import planner
 OVERRIDES = {"task_quitting": True, "delta": 1}
 
 
+# three epochs on 20 train_small instances with exact labels, handed over to CBGABI
+SHORT_RUN = ["--config", "planner_default", "--scenario", "train_small", "--solver", "exact", "--then", "cbgabi",
+             "--episodes", "20", "--epochs", "3", "--eval-episodes", "3", "--jobs", "1", "--torch-threads", "1"]
+
+
+def losses(run: object) -> list[float]:
+    with open(f"{run}/planner.csv") as fh:
+        return [float(row["loss"]) for row in csv.DictReader(fh)]
+
+
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
-    """A planner trained for three epochs on 20 train_small instances with exact labels, handed over to CBGABI."""
+    """A planner of ``SHORT_RUN``."""
     out = tmp_path_factory.mktemp("planner") / "run"
-    planner.main(["--config", "planner_default", "--scenario", "train_small", "--solver", "exact", "--then", "cbgabi",
-                  "--episodes", "20", "--epochs", "3", "--eval-episodes", "3", "--jobs", "1", "--torch-threads", "1",
-                  "--out-dir", str(out)])
+    planner.main([*SHORT_RUN, "--out-dir", str(out)])
     return out
 
 
@@ -123,6 +131,15 @@ def test_a_short_run_lowers_the_validation_loss_and_saves_a_planner_that_hands_o
     for seed in (0, 1):
         allocation = rollout(env, policy, seed=seed)
         assert allocation.converged and not allocation.conflicts
+
+
+def test_annealing_the_learning_rate_changes_the_epochs_after_the_first(trained, tmp_path):
+    """The cosine schedule starts at the configured rate (epoch 0 the same, bit for bit, as the constant rate) and
+    lowers it from epoch 1 on, so the later epochs' losses differ."""
+    planner.main([*SHORT_RUN, "--anneal-lr", "true", "--out-dir", str(tmp_path / "run")])
+    constant, annealed = losses(trained), losses(tmp_path / "run")
+    assert annealed[0] == constant[0]
+    assert all(a != c for a, c in zip(annealed[1:], constant[1:]))
 
 
 def test_loading_the_planner_again_reproduces_every_action(trained):

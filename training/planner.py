@@ -77,6 +77,7 @@ class PlannerConfig:
     epochs: int = opt(30, "passes over the data set")
     batch_size: int = opt(256, "minibatch size")
     learning_rate: float = opt(1e-3, "Adam learning rate")
+    anneal_lr: bool = opt(False, "decay the learning rate to 0 over the epochs along a cosine (CosineAnnealingLR)")
     eval_episodes: int = opt(40, "validation instances (their states give the validation loss; played at the end)")
     jobs: int = opt(2, "processes that label instances")
     torch_threads: int = opt(2, "torch threads")
@@ -202,6 +203,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     layout = TaskAllocEnv(resolve_config(cfg.scenario), **cfg.env_overrides).observation_layout
     actor = make_actor(cfg, layout.own_size, layout.task_size)
     optimizer = th.optim.Adam(actor.parameters(), lr=cfg.learning_rate)
+    schedule = th.optim.lr_scheduler.CosineAnnealingLR(optimizer, cfg.epochs) if cfg.anneal_lr else None
     data = tensors(train)
     with open(out_dir / "planner.csv", "w", newline="") as fh:
         writer = csv.writer(fh)
@@ -209,6 +211,8 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         for epoch in range(cfg.epochs):
             actor.train()
             loss = fit_epoch(actor, optimizer, data, cfg.batch_size, rng)
+            if schedule is not None:
+                schedule.step()
             actor.eval()
             with th.no_grad():
                 val_loss = plan_loss(actor, *val).item()
