@@ -48,6 +48,11 @@ def lns_draw(scenario: Scenario, cfg: TaskAllocConfig) -> Allocation:
 SOLVERS = {"exact": exact, "lns": lns_draw}
 
 
+def planned(shares: np.ndarray) -> tuple[int, ...]:
+    """The tasks of an agent's (M,) ``shares`` at ``THRESHOLD`` or above, the most frequent first."""
+    return tuple(int(j) for j in np.argsort(-shares, kind="stable") if shares[j] >= THRESHOLD)
+
+
 class LocalPlanPolicy(Policy):
     """Round 0: bids along the tasks its sampled optima give the agent most often; later rounds: passes."""
 
@@ -59,8 +64,10 @@ class LocalPlanPolicy(Policy):
             raise ValueError(f"local plan: unknown solver {solver!r}; known: {', '.join(SOLVERS)}")
         self.samples, self.solver = samples, solver
         self.name = f"local plan ({samples} draws{'' if solver == 'exact' else ', ' + solver})"
+        self.team_shares = np.zeros((0, 0))      # (N, M) after start: each agent's shares (``shares``)
         self.plans: tuple[tuple[int, ...], ...] = ()
-        self._memo: dict[tuple, tuple[tuple[int, ...], ...]] = {}   # the plans of an instance already played
+        # the shares and plans of an instance already played
+        self._memo: dict[tuple, tuple[np.ndarray, tuple[tuple[int, ...], ...]]] = {}
 
     def start(self, env: Any, seed: int | None = None) -> None:
         super().start(env, seed)
@@ -68,9 +75,10 @@ class LocalPlanPolicy(Policy):
         # the instance's identity (the teammates' starts only tell instances apart; no plan reads them)
         key = (seed, *(a.tobytes() for a in (scenario.agent_pos, scenario.task_pos, scenario.task_start)))
         if key not in self._memo:
-            self._memo[key] = tuple(self.plan(scenario, i, np.random.default_rng([0 if seed is None else seed, i]))
-                                    for i in range(scenario.n_agents))
-        self.plans = self._memo[key]
+            shares = np.array([self.shares(scenario, i, np.random.default_rng([0 if seed is None else seed, i]))
+                               for i in range(scenario.n_agents)])
+            self._memo[key] = shares, tuple(planned(row) for row in shares)
+        self.team_shares, self.plans = self._memo[key]
 
     def shares(self, scenario: Scenario, agent: int, rng: np.random.Generator) -> np.ndarray:
         """(M,) the share of ``samples`` drawn teams (``agent``'s own start kept) whose solution puts each task on
@@ -85,8 +93,7 @@ class LocalPlanPolicy(Policy):
 
     def plan(self, scenario: Scenario, agent: int, rng: np.random.Generator) -> tuple[int, ...]:
         """The tasks ``agent`` bids on in round 0, the most frequent first."""
-        shares = self.shares(scenario, agent, rng)
-        return tuple(int(j) for j in np.argsort(-shares, kind="stable") if shares[j] >= THRESHOLD)
+        return planned(self.shares(scenario, agent, rng))
 
     def act(self, observations: Mapping[str, Mapping[str, np.ndarray]],
             infos: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, int]:
