@@ -13,8 +13,8 @@ estimated at ½ or more (those both bid on), how many, precision and recall. The
 what the agent's own information allows; the planner's distance from it is what its training has not learned.
 The seeds default to the validation instances, on which ``training.planner`` reports its validation loss over
 every round-0 state (this table keeps the first one of each agent, the state the plan is made in). Costs as
-``evaluation.local_plan``: N × ``--samples`` solves per instance. docs/learning.md ("The local plan learned")
-quotes this table.
+``evaluation.local_plan``: N × ``--samples`` solves per instance. docs/learning.md ("The local plan learned") names
+this command.
 """
 
 from __future__ import annotations
