@@ -34,6 +34,7 @@ from policies.base import stack_observations
 from policies.handover import Handover
 from policies.local_plan import SOLVERS, LocalPlanPolicy
 from policies.round_zero import RoundZeroPlanner
+from taskalloc_env.allocation import on_paths
 from taskalloc_env.config import resolve_config
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
@@ -49,6 +50,12 @@ class FirstStates:
     allowed: np.ndarray                 # (A, M) bool
     on_path: np.ndarray                 # (A, M) bool
     estimates: dict[str, np.ndarray]    # label → (A, M)
+
+    @classmethod
+    def concat(cls, parts: Sequence[FirstStates]) -> FirstStates:
+        """The states of ``parts`` one after the other (every part has the same estimates)."""
+        return cls(np.concatenate([p.allowed for p in parts]), np.concatenate([p.on_path for p in parts]),
+                   {label: np.concatenate([p.estimates[label] for p in parts]) for label in parts[0].estimates})
 
 
 def planner_of(name: str) -> RoundZeroPlanner:
@@ -76,10 +83,7 @@ def first_states(job: tuple[str, str, int, Sequence[str], Sequence[int]]) -> Fir
         local.start(env, int(seed))
         obs, masks = stack_observations(observations, agents)
         allowed.append(masks[:, 1: m + 1] > 0)
-        path = np.zeros((len(agents), m), dtype=bool)
-        for i, tasks in enumerate(SOLVERS[solver](env.scenario, env.config).paths):
-            path[i, list(tasks)] = True
-        on_path.append(path)
+        on_path.append(on_paths(SOLVERS[solver](env.scenario, env.config).paths, m))
         for name, planner in zip(planner_names, planners):
             planner.start(env, int(seed))
             estimates[name].append(planner.probabilities(obs if planner.columns is None else obs[:, planner.columns]))
@@ -136,9 +140,7 @@ def main(argv: Sequence[str] | None = None) -> str:
     seeds = list(range(args.seed_start, args.seed_start + args.episodes))
     chunks = [(args.scenario, args.reference, args.samples, args.planner, seeds[k::args.jobs])
               for k in range(min(args.jobs, len(seeds)))]
-    parts = list(parallel_map(first_states, chunks, args.jobs))
-    states = FirstStates(np.concatenate([p.allowed for p in parts]), np.concatenate([p.on_path for p in parts]),
-                         {label: np.concatenate([p.estimates[label] for p in parts]) for label in parts[0].estimates})
+    states = FirstStates.concat(list(parallel_map(first_states, chunks, args.jobs)))
     share = states.on_path[states.allowed].mean()
     out = table(states)
     print(f"{args.scenario}, seeds {seeds[0]}–{seeds[-1]}: {int(states.allowed.sum())} allowed tasks at the agents' "

@@ -39,6 +39,7 @@ from evaluation.pool import parallel_map
 from evaluation.report import markdown_table
 from policies import make_policy, rollout
 from taskalloc_env import TaskAllocEnv
+from taskalloc_env.allocation import on_paths
 from taskalloc_env.errors import run_cli
 
 ALGORITHMS = ("cbba", "cbga", "cbgabi")
@@ -103,9 +104,7 @@ def _episode(name: str, kw: dict[str, Any], seed: int) -> dict[str, Any]:
 
 def group_conflicts(protocol: Any) -> int:
     """Tasks with more than L_j members among the live agents of one connected group (members: own flown paths)."""
-    members = np.zeros((protocol.scenario.n_agents, protocol.scenario.n_tasks), dtype=bool)
-    for i, path in enumerate(protocol.flown_paths):
-        members[i, list(path)] = True
+    members = on_paths(protocol.flown_paths, protocol.scenario.n_tasks)
     comp = protocol.live_graph.component
     bad = 0
     for c in np.unique(comp[protocol.alive]):

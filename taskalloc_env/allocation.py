@@ -15,6 +15,14 @@ import numpy as np
 from taskalloc_env.scoring import Schedule, ScoringModel, TeamScore, team_score
 
 
+def on_paths(paths: Sequence[Sequence[int]], n_tasks: int) -> np.ndarray:
+    """(N, M) bool: task j is on agent i's path, for one path per agent."""
+    out = np.zeros((len(paths), n_tasks), dtype=bool)
+    for i, path in enumerate(paths):
+        out[i, list(path)] = True
+    return out
+
+
 @dataclasses.dataclass
 class Counters:
     """Cumulative figures of one run (communication steps and bids as the thesis counts them, §3.3.2–3.3.3)."""

@@ -43,6 +43,7 @@ from policies.base import stack_observations
 from policies.local_plan import SOLVERS
 from policies.oracle import bid_along
 from policies.round_zero import PLANNER, bid_log_odds, is_threshold
+from taskalloc_env.allocation import on_paths
 from taskalloc_env.config import resolve_config
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
@@ -120,9 +121,7 @@ def label(job: tuple[str, dict[str, Any], str, Sequence[int]]) -> Plans:
     for seed in seeds:
         observations, _ = env.reset(seed=int(seed))
         paths = SOLVERS[solver](env.scenario, env.config).paths
-        on_path = np.zeros((len(agents), m), dtype=bool)
-        for i, path in enumerate(paths):
-            on_path[i, list(path)] = True
+        on_path = on_paths(paths, m)
         while env.agents:
             obs, masks = stack_observations(observations, agents)
             if obs[0, round_column] > 0:
