@@ -58,15 +58,21 @@ class FirstStates:
                    {label: np.concatenate([p.estimates[label] for p in parts]) for label in parts[0].estimates})
 
 
-def planner_of(name: str) -> RoundZeroPlanner:
-    """The round-0 planner of a planner checkpoint's policy name (``ConfigError`` naming it otherwise)."""
+def planner_pair(name: str) -> Handover:
+    """A planner checkpoint's policy: its round-0 planner (``first``) and the policy it hands over to (``then``);
+    ``ConfigError`` naming ``--planner`` for anything else."""
     try:
         policy = make_policy(name)
     except ValueError as exc:       # a CheckpointError is a ConfigError already
         raise ConfigError(f"--planner {name}: {exc}") from None
     if not (isinstance(policy, Handover) and isinstance(policy.first, RoundZeroPlanner)):
         raise ConfigError(f"--planner {name}: not a round-0 planner (a checkpoint written by training.planner)")
-    return policy.first
+    return policy
+
+
+def planner_of(name: str) -> RoundZeroPlanner:
+    """The round-0 planner of a planner checkpoint's policy name (``ConfigError`` naming it otherwise)."""
+    return planner_pair(name).first
 
 
 def first_states(job: tuple[str, str, int, Sequence[str], Sequence[int]]) -> FirstStates:

@@ -48,9 +48,9 @@ def lns_draw(scenario: Scenario, cfg: TaskAllocConfig) -> Allocation:
 SOLVERS = {"exact": exact, "lns": lns_draw}
 
 
-def planned(shares: np.ndarray) -> tuple[int, ...]:
-    """The tasks of an agent's (M,) ``shares`` at ``THRESHOLD`` or above, the most frequent first."""
-    return tuple(int(j) for j in np.argsort(-shares, kind="stable") if shares[j] >= THRESHOLD)
+def planned(shares: np.ndarray, threshold: float = THRESHOLD) -> tuple[int, ...]:
+    """The tasks of an agent's (M,) ``shares`` at ``threshold`` or above, the most frequent first."""
+    return tuple(int(j) for j in np.argsort(-shares, kind="stable") if shares[j] >= threshold)
 
 
 class LocalPlanPolicy(Policy):

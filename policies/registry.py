@@ -84,10 +84,11 @@ def load_learned(source: str, planner_allowed: bool = True, **kwargs: Any) -> Po
         return LearnedPolicy.from_checkpoint(checkpoint, name=name, **kwargs)
     if not planner_allowed:
         raise CheckpointError(f"{source}: a planner's 'then' is itself a planner; it must be a bidding policy")
-    then, threshold = planner_meta(checkpoint, source)
+    then, threshold, replan = planner_meta(checkpoint, source)
     if kwargs:
         raise ValueError(f"{name} is a planner; options {sorted(kwargs)} are not taken")
-    planner = RoundZeroPlanner.from_checkpoint(checkpoint, name=f"{name} (round-0 planner)", threshold=threshold)
+    planner = RoundZeroPlanner.from_checkpoint(checkpoint, name=f"{name} (round-0 planner)", threshold=threshold,
+                                               replan=replan)
     follower = (load_learned(then.split(":", 1)[1], planner_allowed=False) if then.lower().startswith("learned:")
                 else make_policy(then))
     policy = Handover(planner, follower, 1)

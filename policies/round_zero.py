@@ -3,21 +3,31 @@
 In round 0 no message has been exchanged (thesis Alg 5), so an agent's first bundle can only rest on what it knows
 itself. ``policies.local_plan`` plans that bundle by solving drawn teams around the agent's own start; the planner
 trained by ``training.planner`` learns the same thing from its observation: for each task, the probability that
-the task is on the agent's path in the solver's allocation. ``RoundZeroPlanner`` plays it the local plan's way: in
-round 0 it bids on the most likely task its mask allows while that probability is at least ``threshold``, else
-passes. It passes in every later round; a planner checkpoint names the policy that takes over (``then``), and
+the task is on the agent's path in the solver's allocation. ``RoundZeroPlanner`` plays it in round 0 one of two
+ways (``replan``). Replanning (the default, and every checkpoint without the meta key): at each step it bids on the
+most likely task its mask allows while that probability is at least ``threshold``, else passes, estimating afresh
+from each state. Planning once, the local plan's way (``replan=False``): at the agent's first round-0 state it
+fixes its plan, the allowed tasks at ``threshold`` or above, most likely first (``policies.local_plan.planned``),
+and bids along it (``policies.oracle.bid_along``). The network is fitted on the states of bids along the solver's
+path, not along its own estimates, so the later round-0 states a replanning agent reaches are ones it never saw in
+training; planning once reads only the first state, the one the local plan reads too. It passes in every later
+round; a planner checkpoint names the policy that takes over (``then``), and
 ``policies.registry`` loads the pair as one policy, so ``learned:<planner checkpoint>`` runs anywhere a policy name
 does. Execution stays decentralised: each agent reads only its own observation.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
+from policies.base import stack_observations
 from policies.checkpoint import Checkpoint, CheckpointError
 from policies.learned import LearnedPolicy
+from policies.local_plan import planned
+from policies.oracle import bid_along
 
 PLANNER = "round0-planner"      # the checkpoint's meta["algo"] of a planner
 
@@ -28,14 +38,37 @@ def is_threshold(value: Any) -> bool:
 
 
 class RoundZeroPlanner(LearnedPolicy):
-    """Round 0: bids on the allowed task most likely on its path while that probability is ≥ ``threshold``;
-    later rounds: passes. The actor's bid logits are read as per-task log-odds (``training.planner``)."""
+    """Round 0: bids on the allowed tasks most likely on its path while that probability is ≥ ``threshold``,
+    re-estimated at every step (``replan``) or fixed at the agent's first state; later rounds: passes. The actor's
+    bid logits are read as per-task log-odds (``training.planner``)."""
 
-    def __init__(self, *args: Any, threshold: float = 0.5, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, threshold: float = 0.5, replan: bool = True, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         if not is_threshold(threshold):
             raise ValueError(f"{self.name}: threshold must be a number in (0, 1), got {threshold!r}")
-        self.threshold = float(threshold)
+        if not isinstance(replan, bool):
+            raise ValueError(f"{self.name}: replan must be true or false, got {replan!r}")
+        self.threshold, self.replan = float(threshold), replan
+        self.plans: dict[str, tuple[int, ...]] = {}     # agent → its round-0 plan (``replan=False``), per episode
+
+    def start(self, env: Any, seed: int | None = None) -> None:
+        super().start(env, seed)
+        self.plans = {}
+
+    def act(self, observations: Mapping[str, Mapping[str, np.ndarray]],
+            infos: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, int]:
+        if self.replan or not observations:
+            return super().act(observations, infos)
+        m, round_column = self.layout.n_tasks, self.layout.own_names.index("round")
+        agents = list(observations)
+        obs, masks = stack_observations(observations, agents)
+        new = [k for k, a in enumerate(agents) if a not in self.plans and obs[k, round_column] == 0]
+        if new:
+            actor_obs = obs[new] if self.columns is None else obs[new][:, self.columns]
+            p = np.where(masks[new, 1: m + 1] > 0, self.probabilities(actor_obs), -1.0)
+            self.plans.update((agents[k], planned(row, self.threshold)) for k, row in zip(new, p))
+        return {a: bid_along(self.plans.get(a, ()), masks[k]) if obs[k, round_column] == 0 else 0
+                for k, a in enumerate(agents)}
 
     def probabilities(self, obs: np.ndarray) -> np.ndarray:
         """(B, M) the probability that each task is on the agent's path, from the actor's observations (B, D)."""
@@ -62,12 +95,16 @@ def bid_log_odds(actor: Any, obs: Any) -> Any:
     return actor(obs, th.ones(len(obs), 1 + 2 * m, dtype=th.bool))[:, 1: 1 + m]
 
 
-def planner_meta(checkpoint: Checkpoint, where: str) -> tuple[str, float]:
-    """(``then``, ``threshold``) from a planner checkpoint's meta, each checked."""
+def planner_meta(checkpoint: Checkpoint, where: str) -> tuple[str, float, bool]:
+    """(``then``, ``threshold``, ``replan``) from a planner checkpoint's meta, each checked (a checkpoint without
+    ``replan`` replans, as every planner did before the option)."""
     then, threshold = checkpoint.meta.get("then"), checkpoint.meta.get("threshold", 0.5)
+    replan = checkpoint.meta.get("replan", True)
     if not isinstance(then, str) or not then:
         raise CheckpointError(f"{where}: a planner checkpoint names the policy that takes over in meta 'then' (a "
                               f"policy name), got {then!r}")
     if not is_threshold(threshold):
         raise CheckpointError(f"{where}: meta 'threshold' must be a number in (0, 1), got {threshold!r}")
-    return then, float(threshold)
+    if not isinstance(replan, bool):
+        raise CheckpointError(f"{where}: meta 'replan' must be true or false, got {replan!r}")
+    return then, float(threshold), replan

@@ -81,14 +81,15 @@ def test_the_loss_is_the_binary_cross_entropy_over_the_allowed_tasks_only():
         planner.plan_loss(actor, obs, allowed, on_path).item(), rel=1e-6)
 
 
-def flat_planner(env: TaskAllocEnv, log_odds: float, threshold: float = 0.5) -> RoundZeroPlanner:
+def flat_planner(env: TaskAllocEnv, log_odds: float, threshold: float = 0.5, replan: bool = True
+                 ) -> RoundZeroPlanner:
     """A planner whose actor gives every task the same log-odds."""
     layout = env.observation_layout
     actor = PoolingActor(layout.own_size, layout.task_size, 8)
     with th.no_grad():
         actor.task_head[-1].weight.zero_()
         actor.task_head[-1].bias.copy_(th.tensor([log_odds, 0.0]))
-    policy = RoundZeroPlanner(actor, layout.own_names, layout.task_names, threshold=threshold)
+    policy = RoundZeroPlanner(actor, layout.own_names, layout.task_names, threshold=threshold, replan=replan)
     policy.start(env, 0)
     return policy
 
@@ -112,11 +113,40 @@ def test_it_bids_in_round_0_while_a_task_is_likely_and_passes_in_every_later_rou
     assert {0, 1} <= rounds_seen
 
 
+@pytest.mark.parametrize("replan", [True, False])
+def test_replanning_estimates_at_every_step_and_planning_once_keeps_the_first_states_plan(replan):
+    """Every task likely (0.8) before the agent's first bid, unlikely (0.2) after it: replanning bids once and then
+    passes; planning once bids along every task its first state allows, in order (bid_along), whatever it estimates
+    later."""
+    env = TaskAllocEnv("train_small", **OVERRIDES)
+    observations, infos = env.reset(seed=7)
+    m, bundle = env.observation_layout.n_tasks, env.observation_layout.own_names.index("bundle_size")
+    policy = flat_planner(env, 1.0, replan=replan)
+    policy.probabilities = lambda obs: np.where(obs[:, [bundle]] > 0, 0.2, 0.8) * np.ones((len(obs), m))
+    first_plan = {a: tuple(np.flatnonzero(o["action_mask"][1: m + 1])) for a, o in observations.items()}
+    bids = dict.fromkeys(env.agents, 0)
+    while env.agents and infos[env.agents[0]]["round"] == 0:
+        actions = policy.act(observations, infos)
+        for agent, obs in observations.items():
+            mask = obs["action_mask"]
+            if replan:
+                allowed = np.flatnonzero(mask[1: m + 1])
+                want = 1 + allowed[0] if bids[agent] == 0 and len(allowed) else 0
+            else:
+                want = next((1 + j for j in first_plan[agent] if mask[1 + j]), 0)
+            assert actions[agent] == want
+            bids[agent] += actions[agent] > 0
+        observations, _, _, _, infos = env.step(actions)
+    assert max(bids.values()) == 1 if replan else max(bids.values()) > 1
+
+
 def test_a_bad_threshold_is_refused_by_name():
     env = TaskAllocEnv("train_small")
     for threshold in (0.0, 1.0, True, "half"):
         with pytest.raises(ValueError, match="threshold must be a number in"):
             flat_planner(env, 1.0, threshold)
+    with pytest.raises(ValueError, match="replan must be true or false"):
+        flat_planner(env, 1.0, replan="no")
 
 
 def test_a_short_run_lowers_the_validation_loss_and_saves_a_planner_that_hands_over(trained):
@@ -163,11 +193,23 @@ def rewritten(trained, tmp_path, **meta):
     ({"then": 3}, ["meta 'then'", "got 3"]),
     ({"threshold": 1.5}, ["meta 'threshold'", "1.5"]),
     ({"then": "nosuch"}, ["unknown policy 'nosuch'"]),
+    ({"replan": "no"}, ["meta 'replan'", "true or false", "'no'"]),
 ])
 def test_a_planner_checkpoint_with_bad_meta_is_refused_by_name(trained, tmp_path, meta, words):
     with pytest.raises(ValueError) as exc:
         make_policy(f"learned:{rewritten(trained, tmp_path, **meta)}")
     assert all(w in str(exc.value) for w in words), exc.value
+
+
+def test_the_checkpoint_says_whether_the_planner_replans(trained, tmp_path):
+    """A short run saves its ``replan`` (true by default) and a checkpoint without the key replans, as planners did
+    before the option; a checkpoint with ``replan: false`` plans once."""
+    assert json.loads((trained / "model.json").read_text())["meta"]["replan"] is True
+    assert make_policy(f"learned:{trained}").first.replan is True
+    (tmp_path / "old").mkdir()
+    (tmp_path / "once").mkdir()
+    assert make_policy(f"learned:{rewritten(trained, tmp_path / 'old', replan=None)}").first.replan is True
+    assert make_policy(f"learned:{rewritten(trained, tmp_path / 'once', replan=False)}").first.replan is False
 
 
 def test_a_planner_that_hands_over_to_a_planner_is_refused(trained, tmp_path):

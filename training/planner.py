@@ -11,8 +11,9 @@ sizes ``exact`` cannot reach), plays round 0 with every agent bidding along its 
 tasks it may bid on and which of them are on its path. The actor's bid logits are fitted as per-task log-odds with
 binary cross-entropy over the allowed tasks, so the network estimates, from what the agent sees, the probability
 that a task is on its path, the share the local plan estimates by sampling. Play (``policies.round_zero``): bid
-the most likely allowed task while that probability is ≥ ``threshold``, then hand over to ``then`` (by default the
-committed MAPPO bidder) from round 1 on.
+the most likely allowed task while that probability is ≥ ``threshold`` (re-estimated at every step, or planned once
+at the agent's first round-0 state: ``replan``), then hand over to ``then`` (by default the committed MAPPO bidder)
+from round 1 on.
 
 The run writes ``model.json`` + ``model.safetensors`` (``learned:<out_dir>`` plays the planner, then ``then``),
 ``planner.csv`` (one row per epoch: training and validation loss), ``config.yaml`` and ``summary.yaml`` (the
@@ -70,6 +71,8 @@ class PlannerConfig:
     solver: str = opt("lns", "the labels' solver: exact (small scenarios) | lns (policies.local_plan.lns_draw)")
     then: str = opt("learned:mappo_small_pooling_1m", "the policy that takes over from round 1 on")
     threshold: float = opt(0.5, "bid while the most likely allowed task's probability is at least this")
+    replan: bool = opt(True, "estimate afresh at every round-0 step (true) or plan once at the agent's first "
+                             "round-0 state, the local plan's way (false); policies.round_zero")
     actor: str = opt("pooling", "actor network: attention | pooling (policies.networks)")
     hidden: int = opt(64, "width of the actor")
     heads: int = opt(4, "attention heads")
@@ -220,7 +223,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
             print(f"epoch {epoch}: loss {loss:.4f}, validation loss {val_loss:.4f}", flush=True)
 
     meta = {"name": cfg.name, "algo": PLANNER, "seed": cfg.seed, "scenario": cfg.scenario, "solver": cfg.solver,
-            "then": cfg.then, "threshold": cfg.threshold}
+            "then": cfg.then, "threshold": cfg.threshold, "replan": cfg.replan}
     checkpoint.save(out_dir / "model", actor, layout.own_names, layout.task_names, cfg.env_overrides, meta)
     env_kwargs = {"scenario": resolve_config(cfg.scenario)}
     scores = {label: float(np.mean([a.score for a in evaluate(policy, env_kwargs, val_seeds)]))
