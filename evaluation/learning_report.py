@@ -92,6 +92,8 @@ MIXTURE_POOLING = Config("MAPPO pooling, curriculum 4×8 → 10×20", "mappo_mix
 DELAY_POOLING = Config("MAPPO pooling, trained under message delay (0–2 rounds)", "mappo_delay_pooling")
 PLANNER = Config("round-0 planner learned from LNS on 10 × 20 (ours), then MAPPO pooling 1 M", "planner_default",
                  {0: "planner_default"})
+PLANNER_SMALL = Config("round-0 planner, attention, learned from the optimum on 4 × 8 (ours), then MAPPO pooling 1 M",
+                       "planner_small_attention", {0: "planner_small_attention"})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,8 +114,8 @@ class Setting:
 
 SETTINGS = {s.name: s for s in (
     Setting("train_small", "training scenario, 4 × 8, L_j ∈ {1, 2}", "train_small", {},
-            (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING, PLANNER),
-            behaviour_cloning=True),
+            (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING, PLANNER,
+             PLANNER_SMALL), behaviour_cloning=True),
     Setting("default", "default scenario, 10 × 20, L_j = 4", "default", {},
             (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING, PLANNER)),
     Setting("size_8x16", "8 × 16, L_j = 3 (no model trained on it)", "default",
