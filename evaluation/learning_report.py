@@ -231,9 +231,10 @@ def _key(row: Mapping[str, Any]) -> tuple:
 
 
 def archive_logs(folder: Path, target: Path) -> None:
-    """A run's learning curve and summary, kept in the repository for ``render``."""
+    """A run's learning curve (``eval.csv``; a planner's ``planner.csv``) and summary, kept in the repository for
+    ``render``."""
     target.mkdir(parents=True, exist_ok=True)
-    for name in ("eval.csv", "summary.yaml", "config.yaml"):
+    for name in ("eval.csv", "planner.csv", "summary.yaml", "config.yaml"):
         if (folder / name).is_file():
             shutil.copyfile(folder / name, target / name)
 

@@ -237,9 +237,10 @@ def test_a_bad_planner_config_is_one_line_and_exit_2(argv, words, tmp_path, caps
     assert not (tmp_path / "run").exists()
 
 
-def test_the_committed_planner_loads_by_name_and_hands_over_to_the_committed_bidder():
-    policy = make_policy("learned:planner_default")
+@pytest.mark.parametrize("name, scenario", [("planner_default", "default"), ("planner_small_attention", "train_small")])
+def test_the_committed_planners_load_by_name_and_hand_over_to_the_committed_bidder(name, scenario):
+    policy = make_policy(f"learned:{name}")
     assert isinstance(policy.first, RoundZeroPlanner) and policy.then.name == "learned:mappo_small_pooling_1m"
-    env = TaskAllocEnv("default", **policy.env_overrides)
+    env = TaskAllocEnv(scenario, **policy.env_overrides)
     allocation = rollout(env, policy, seed=10_000)
     assert allocation.converged and not allocation.conflicts and allocation.score > 0
