@@ -10,10 +10,11 @@ from each state. Planning once, the local plan's way (``replan=False``): at the 
 fixes its plan, the allowed tasks at ``threshold`` or above, most likely first (``policies.local_plan.planned``),
 and bids along it (``policies.oracle.bid_along``). The network is fitted on the states of bids along the solver's
 path, not along its own estimates, so the later round-0 states a replanning agent reaches are ones it never saw in
-training; planning once reads only the first state, the one the local plan reads too. It passes in every later
-round; a planner checkpoint names the policy that takes over (``then``), and
-``policies.registry`` loads the pair as one policy, so ``learned:<planner checkpoint>`` runs anywhere a policy name
-does. Execution stays decentralised: each agent reads only its own observation.
+training; planning once reads only the first state, the one the local plan reads too. Replanning plays better
+(docs/decisions.md, "the round 0 learned"). It passes in every later round; a planner checkpoint names the policy
+that takes over (``then``), and ``policies.registry`` loads the pair as one policy, so ``learned:<planner
+checkpoint>`` runs anywhere a policy name does. Execution stays decentralised: each agent reads only its own
+observation.
 """
 
 from __future__ import annotations
