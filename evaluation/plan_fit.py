@@ -92,7 +92,7 @@ def first_states(job: tuple[str, str, int, Sequence[str], Sequence[int]]) -> Fir
         on_path.append(on_paths(SOLVERS[solver](env.scenario, env.config).paths, m))
         for name, planner in zip(planner_names, planners):
             planner.start(env, int(seed))
-            estimates[name].append(planner.probabilities(obs if planner.columns is None else obs[:, planner.columns]))
+            estimates[name].append(planner.probabilities(planner.actor_input(obs)))
         estimates[local.name].append(local.team_shares)
     return FirstStates(np.concatenate(allowed), np.concatenate(on_path),
                        {label: np.concatenate(rows) for label, rows in estimates.items()})

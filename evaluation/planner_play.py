@@ -23,7 +23,7 @@ from evaluation.plan_fit import planner_pair
 from evaluation.seeds import VALIDATION_SEED_START
 from evaluation.stats import format_p, paired
 from policies.handover import Handover
-from policies.round_zero import RoundZeroPlanner, is_threshold
+from policies.round_zero import is_threshold
 from taskalloc_env.config import resolve_config
 from taskalloc_env.errors import ConfigError, run_cli
 
@@ -55,9 +55,8 @@ def main(argv: Sequence[str] | None = None) -> str:
              f"| {follower.name} alone | – | {alone.mean():.1f} | 100.0 % | – |"]
     for threshold in args.thresholds:
         for replan in (True, False):
-            first = RoundZeroPlanner(planner.actor, planner.own_features, planner.task_features,
-                                     planner.env_overrides, planner.meta, threshold=threshold, replan=replan)
-            scores = np.array([a.score for a in evaluate(Handover(first, follower, 1), env_kwargs, seeds)])
+            played = Handover(planner.with_rule(threshold, replan), follower, 1)
+            scores = np.array([a.score for a in evaluate(played, env_kwargs, seeds)])
             test = paired(scores, alone)
             lines.append(f"| {'replanning' if replan else 'planned once'} | {threshold:g} | {scores.mean():.1f} | "
                          f"{100 * test.ratio:.1f} % | {test.mean_diff:+.1f} ({format_p(test.p_t)}) |")

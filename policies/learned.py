@@ -96,9 +96,11 @@ class LearnedPolicy(Policy):
             return {}
         agents = list(observations)
         obs, masks = stack_observations(observations, agents)
-        if self.columns is not None:
-            obs = obs[:, self.columns]
-        return {a: int(c) for a, c in zip(agents, self.decide(obs, masks))}
+        return {a: int(c) for a, c in zip(agents, self.decide(self.actor_input(obs), masks))}
+
+    def actor_input(self, obs: np.ndarray) -> np.ndarray:
+        """The columns of the environment's observations (B, D) that the actor reads, in its order."""
+        return obs if self.columns is None else obs[:, self.columns]
 
     def decide(self, obs: np.ndarray, masks: np.ndarray) -> np.ndarray:
         """One action per row: the actor's observation (its own features only) and the action mask."""

@@ -65,11 +65,15 @@ class RoundZeroPlanner(LearnedPolicy):
         obs, masks = stack_observations(observations, agents)
         new = [k for k, a in enumerate(agents) if a not in self.plans and obs[k, round_column] == 0]
         if new:
-            actor_obs = obs[new] if self.columns is None else obs[new][:, self.columns]
-            p = np.where(masks[new, 1: m + 1] > 0, self.probabilities(actor_obs), -1.0)
+            p = np.where(masks[new, 1: m + 1] > 0, self.probabilities(self.actor_input(obs[new])), -1.0)
             self.plans.update((agents[k], planned(row, self.threshold)) for k, row in zip(new, p))
         return {a: bid_along(self.plans.get(a, ()), masks[k]) if obs[k, round_column] == 0 else 0
                 for k, a in enumerate(agents)}
+
+    def with_rule(self, threshold: float, replan: bool) -> RoundZeroPlanner:
+        """The same weights and features, played with another ``threshold`` and ``replan``."""
+        return type(self)(self.actor, self.own_features, self.task_features, self.env_overrides, self.meta,
+                          deterministic=self.deterministic, name=self.name, threshold=threshold, replan=replan)
 
     def probabilities(self, obs: np.ndarray) -> np.ndarray:
         """(B, M) the probability that each task is on the agent's path, from the actor's observations (B, D)."""
