@@ -6,8 +6,9 @@ weights, nothing executable): a committed model by name (``train_small``, from `
 weights (parameter sharing); the action is greedy (``deterministic=True``: the most likely kind of action — pass,
 bid or quit — then the most likely action of that kind, see ``greedy_actions``) or a sample. The pooling network
 has no weight tied to the number of tasks, so a checkpoint trained on ``train_small`` also runs on larger scenarios.
-It also runs where the environment adds mode-dependent task features it never saw (``member_silence`` on a faulty
-network, ``released`` with pop-up tasks): the actor reads its own features, selected by name (``feature_columns``).
+It also runs where the environment adds optional task features it never saw (``member_silence`` on a faulty
+network, ``released`` with pop-up tasks, ``sooner_agents`` and ``nearest_other`` with ``team_features``): the
+actor reads its own features, selected by name (``feature_columns``).
 
 ``env_overrides`` are the protocol options the policy was trained with (e.g. ``task_quitting=True, delta=1`` so it
 can quit tasks as CBGABI does); runners build the environment with them.
@@ -24,11 +25,11 @@ import numpy as np
 from policies.base import Policy, stack_observations
 from policies.checkpoint import Checkpoint, CheckpointError, load
 from taskalloc_env import resources
-from taskalloc_env.observation import FAULT_FEATURES, POPUP_FEATURES, ObservationLayout
+from taskalloc_env.observation import FAULT_FEATURES, POPUP_FEATURES, TEAM_FEATURES, ObservationLayout
 
-# task features the environment adds only in some modes (a faulty network, pop-up tasks): a checkpoint trained
-# without them runs on such an environment with them dropped from its input
-OPTIONAL_TASK_FEATURES = FAULT_FEATURES + POPUP_FEATURES
+# task features the environment adds only in some modes (a faulty network, pop-up tasks, team_features): a
+# checkpoint trained without them runs on such an environment with them dropped from its input
+OPTIONAL_TASK_FEATURES = FAULT_FEATURES + POPUP_FEATURES + TEAM_FEATURES
 
 
 def resolve(source: str | Path) -> Any:
@@ -82,7 +83,7 @@ class LearnedPolicy(Policy):
         if columns is False:
             raise ValueError(f"{self.name} was trained on other observation features: own {self.own_features}, "
                              f"per task {self.task_features}; this environment has own {layout.own_names}, per task "
-                             f"{layout.task_names} (only the mode-dependent task features {OPTIONAL_TASK_FEATURES} "
+                             f"{layout.task_names} (only the optional task features {OPTIONAL_TASK_FEATURES} "
                              "may be added by the environment and are then dropped)")
         self.columns = None if columns is True else columns
         if not self.actor.fits(len(self.own_features), len(self.task_features), layout.n_tasks):
@@ -138,8 +139,9 @@ def feature_columns(layout: ObservationLayout, own_features: tuple[str, ...], ta
     ``True`` when the layout is exactly the checkpoint's (the observation is used as it is); ``False`` when the
     checkpoint cannot run on it: the own features differ, or the environment lacks a task feature the checkpoint
     reads, or it has an extra task feature that is not one of ``OPTIONAL_TASK_FEATURES`` (``member_silence`` on a
-    faulty network, ``released`` with pop-up tasks; see ``taskalloc_env.observation``). Those extras are dropped:
-    the actor sees the features it was trained on, computed the same way, under the new network or task release.
+    faulty network, ``released`` with pop-up tasks, the ``team_features``; see ``taskalloc_env.observation``). Those
+    extras are dropped: the actor sees the features it was trained on, computed the same way, under the new
+    network, task release or observation option.
     """
     if (own_features, task_features) == (layout.own_names, layout.task_names):
         return True

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,6 +23,7 @@ from taskalloc_env.errors import run_cli
 from training import planner
 
 OVERRIDES = {"task_quitting": True, "delta": 1}
+SMALL = Path(__file__).parents[1] / "configs" / "scenarios" / "train_small.yaml"
 
 
 # three epochs on 20 train_small instances with exact labels, handed over to CBGABI
@@ -170,6 +172,78 @@ def test_annealing_the_learning_rate_changes_the_epochs_after_the_first(trained,
     constant, annealed = losses(trained), losses(tmp_path / "run")
     assert annealed[0] == constant[0]
     assert all(a != c for a, c in zip(annealed[1:], constant[1:]))
+
+
+def test_the_label_cache_gives_the_same_run_without_labelling_again(trained, tmp_path, monkeypatch):
+    """A first run keeps its training and validation states (two files), a second reads them back and trains the
+    same losses as a run without the cache; another seed adds only its training states; a file whose key is not
+    the run's is refused by name."""
+    cache = tmp_path / "labels"
+    planner.main([*SHORT_RUN, "--label-cache", str(cache), "--out-dir", str(tmp_path / "first")])
+    assert len(list(cache.glob("*.npz"))) == 2
+
+    def no_labelling(*args):
+        raise AssertionError("labelled again")
+
+    monkeypatch.setattr(planner, "label_all", no_labelling)
+    planner.main([*SHORT_RUN, "--label-cache", str(cache), "--out-dir", str(tmp_path / "second")])
+    assert losses(tmp_path / "second") == losses(tmp_path / "first") == losses(trained)
+    monkeypatch.undo()
+    planner.main([*SHORT_RUN, "--seed", "1", "--label-cache", str(cache), "--out-dir", str(tmp_path / "seed1")])
+    assert len(list(cache.glob("*.npz"))) == 3
+    for kept in cache.glob("*.npz"):
+        with np.load(kept) as data:
+            np.savez(kept, **{**data, "key": np.array("another run")})
+    with pytest.raises(planner.ConfigError, match="holds other states"):
+        planner.main([*SHORT_RUN, "--seed", "1", "--label-cache", str(cache), "--out-dir", str(tmp_path / "bad")])
+
+
+def test_augmenting_fits_each_state_under_one_of_the_eight_symmetries(monkeypatch):
+    """``fit_epoch`` with ``augment``'s symmetries feeds the actor each state turned by one of them (all eight
+    drawn over an epoch), with its labels as they were; with eight identities it is the run without."""
+    from policies.symmetry import square_symmetries
+
+    data = planner.label(("train_small", OVERRIDES, "exact", [3, 4, 5]))
+    env = TaskAllocEnv("train_small", **OVERRIDES)
+    layout = env.observation_layout
+    tensors = planner.tensors(data)
+    symmetries = planner.symmetry_tensors(layout)
+    seen = []
+    monkeypatch.setattr(planner, "plan_loss", lambda actor, obs, allowed, on_path: (
+        seen.append((obs, allowed, on_path)) or bid_log_odds(actor, obs).sum() * 0))
+    th.manual_seed(0)
+    actor = PoolingActor(layout.own_size, layout.task_size, 16)
+    planner.fit_epoch(actor, th.optim.SGD(actor.parameters(), lr=0.0), tensors, 8, np.random.default_rng(0),
+                      symmetries)
+    obs = th.cat([o for o, _, _ in seen]).numpy()
+    allowed, on_path = (th.cat([t[k] for t in seen]).numpy() for k in (1, 2))
+    order = np.random.default_rng(0).permutation(len(data.obs))
+    permutations, signs, shifts = square_symmetries(layout.own_names, layout.task_names, layout.n_tasks)
+    turns = data.obs[order][:, permutations] * signs + shifts                   # (S, 8, D)
+    which = np.abs(turns - obs[:, None, :]).max(axis=2).argmin(axis=1)
+    np.testing.assert_allclose(turns[np.arange(len(obs)), which], obs, atol=1e-6)
+    assert set(which) == set(range(8))
+    np.testing.assert_array_equal(allowed, data.allowed[order])
+    np.testing.assert_array_equal(on_path, data.on_path[order])
+
+    monkeypatch.undo()
+    identity = tuple(t[:1].repeat(8, *([1] * (t.dim() - 1))) for t in symmetries)
+    runs = []
+    for given in (None, identity):
+        th.manual_seed(0)
+        actor = PoolingActor(layout.own_size, layout.task_size, 16)
+        runs.append(planner.fit_epoch(actor, th.optim.Adam(actor.parameters()), tensors, 8,
+                                      np.random.default_rng(0), given))
+    assert runs[0] == runs[1]
+
+
+def test_augmenting_needs_a_square_floor(tmp_path):
+    planner.PlannerConfig(scenario="train_small", augment=True).check()
+    narrow = tmp_path / "narrow.yaml"
+    narrow.write_text(SMALL.read_text().replace("[5.0, 5.0, 2.0]", "[5.0, 4.0, 2.0]"))
+    planner.PlannerConfig(scenario=str(narrow)).check()
+    with pytest.raises(planner.ConfigError, match=r"augment.*square floor"):
+        planner.PlannerConfig(scenario=str(narrow), augment=True).check()
 
 
 def test_loading_the_planner_again_reproduces_every_action(trained):

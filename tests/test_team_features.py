@@ -66,6 +66,23 @@ def test_team_features_stay_in_the_space_and_do_not_change_the_episode(scenario)
         assert allocations[0].score == allocations[1].score
 
 
+@pytest.mark.parametrize("name", ["train_small", "mappo_small_pooling_1m"])
+def test_a_model_trained_without_them_plays_the_same_with_them(name):
+    """The team columns are dropped from the input of a checkpoint that never saw them (the way a round-0 planner
+    trained with them hands over to such a bidder): its episodes are the same with and without the option."""
+    from policies import make_policy, rollout
+
+    for seed in range(3):
+        allocations = []
+        for team in (False, True):
+            policy = make_policy(f"learned:{name}")
+            env = TaskAllocEnv("train_small", team_features=team, **policy.env_overrides)
+            allocations.append(rollout(env, policy, seed=seed))
+            assert (policy.columns is None) is not team
+        assert allocations[0].paths == allocations[1].paths
+        assert allocations[0].score == allocations[1].score
+
+
 def test_a_non_boolean_is_refused():
     with pytest.raises(ConfigError, match="team_features"):
         TaskAllocEnv("train_small", team_features="yes")

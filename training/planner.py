@@ -24,11 +24,14 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import hashlib
+import json
 import os
 import resource
 import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -44,10 +47,12 @@ from policies.base import stack_observations
 from policies.local_plan import SOLVERS
 from policies.oracle import bid_along
 from policies.round_zero import PLANNER, bid_log_odds, is_threshold
+from policies.symmetry import is_square, square_symmetries
 from taskalloc_env.allocation import on_paths
-from taskalloc_env.config import resolve_config
+from taskalloc_env.config import resolve_config, to_mapping
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
+from taskalloc_env.observation import ObservationLayout
 from training.config import check_at_least, check_protocol_options, check_types, opt, parse, plain, prepare_out_dir
 from training.mappo import check_actor, make_actor
 
@@ -82,7 +87,12 @@ class PlannerConfig:
     batch_size: int = opt(256, "minibatch size")
     learning_rate: float = opt(1e-3, "Adam learning rate")
     anneal_lr: bool = opt(False, "decay the learning rate to 0 over the epochs along a cosine (CosineAnnealingLR)")
+    augment: bool = opt(False, "fit each minibatch state under one of the square floor's 8 mirrors and quarter turns, "
+                               "drawn afresh every epoch (policies.symmetry; needs a square floor)")
     eval_episodes: int = opt(40, "validation instances (their states give the validation loss; played at the end)")
+    label_cache: str | None = opt(None, "folder that keeps the labelled states, one .npz per scenario, protocol "
+                                        "options, solver and seeds, reused by a later run with the same four "
+                                        "(e.g. another network on the same data); none: label afresh")
     jobs: int = opt(2, "processes that label instances")
     torch_threads: int = opt(2, "torch threads")
 
@@ -99,6 +109,9 @@ class PlannerConfig:
             raise ConfigError(f"training field 'threshold': got {self.threshold!r}; allowed: a number in (0, 1)")
         if self.learning_rate <= 0:
             raise ConfigError(f"training field 'learning_rate': got {self.learning_rate!r}; allowed: a number > 0")
+        if self.augment and not is_square(arena := resolve_config(self.scenario).arena):
+            raise ConfigError(f"training field 'augment': the symmetries need a square floor, scenario "
+                              f"{self.scenario!r} has arena {arena}")
 
 
 @dataclasses.dataclass
@@ -138,6 +151,28 @@ def label(job: tuple[str, dict[str, Any], str, Sequence[int]]) -> Plans:
 
 
 def labelled(cfg: PlannerConfig, seeds: Sequence[int]) -> Plans:
+    """``label`` over chunks of ``seeds`` in ``cfg.jobs`` processes, in seed order; read from and kept in
+    ``cfg.label_cache`` when it is set."""
+    if cfg.label_cache is None:
+        return label_all(cfg, seeds)
+    key = {"scenario": to_mapping(resolve_config(cfg.scenario)), "env_overrides": cfg.env_overrides,
+           "solver": cfg.solver, "seeds": [int(k) for k in seeds]}
+    text = json.dumps(key, sort_keys=True, default=str)
+    path = Path(cfg.label_cache) / f"{hashlib.sha256(text.encode()).hexdigest()[:16]}.npz"
+    if path.exists():
+        with np.load(path) as kept:
+            if str(kept["key"]) != text:
+                raise ConfigError(f"label cache {str(path)!r} holds other states (its key differs); remove it")
+            return Plans(kept["obs"], kept["allowed"], kept["on_path"])
+    plans = label_all(cfg, seeds)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(f"{path.stem}.{os.getpid()}.partial.npz")    # runs side by side write their own
+    np.savez(partial, key=np.array(text), **dataclasses.asdict(plans))
+    partial.replace(path)       # a run stopped while writing leaves no half file under the key's name
+    return plans
+
+
+def label_all(cfg: PlannerConfig, seeds: Sequence[int]) -> Plans:
     """``label`` over chunks of ``seeds`` in ``cfg.jobs`` processes, in seed order."""
     chunks = [(cfg.scenario, dict(cfg.env_overrides), cfg.solver, list(seeds[k: k + CHUNK]))
               for k in range(0, len(seeds), CHUNK)]
@@ -156,14 +191,21 @@ def tensors(data: Plans) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
 
 
 def fit_epoch(actor: nn.Module, optimizer: th.optim.Optimizer, data: tuple[th.Tensor, ...], batch_size: int,
-              rng: np.random.Generator) -> float:
-    """One pass over ``data`` in random minibatches; the mean loss per allowed task."""
+              rng: np.random.Generator, symmetries: tuple[th.Tensor, ...] | None = None) -> float:
+    """One pass over ``data`` in random minibatches, each state turned by a random one of ``symmetries``
+    (permutations, signs, shifts: ``policies.symmetry.square_symmetries``) when given; the mean loss per allowed
+    task. The labels stay: a turn moves the tasks, not their indices."""
     obs, allowed, on_path = data
     total, weight = 0.0, 0.0
     order = rng.permutation(len(obs))
     for start in range(0, len(obs), batch_size):
         idx = th.as_tensor(order[start: start + batch_size])
-        loss = plan_loss(actor, obs[idx], allowed[idx], on_path[idx])
+        batch = obs[idx]
+        if symmetries is not None:
+            permutations, signs, shifts = symmetries
+            k = th.as_tensor(rng.integers(len(permutations), size=len(idx)))
+            batch = th.gather(batch, 1, permutations[k]) * signs[k] + shifts[k]
+        loss = plan_loss(actor, batch, allowed[idx], on_path[idx])
         optimizer.zero_grad()
         loss.backward()
         nn.utils.clip_grad_norm_(actor.parameters(), MAX_GRAD_NORM)
@@ -171,6 +213,12 @@ def fit_epoch(actor: nn.Module, optimizer: th.optim.Optimizer, data: tuple[th.Te
         n = float(allowed[idx].sum())
         total, weight = total + loss.item() * n, weight + n
     return total / weight
+
+
+def symmetry_tensors(layout: ObservationLayout) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
+    """``policies.symmetry.square_symmetries`` of ``layout`` as tensors ``fit_epoch`` turns states with."""
+    permutations, signs, shifts = square_symmetries(layout.own_names, layout.task_names, layout.n_tasks)
+    return th.as_tensor(permutations), th.as_tensor(signs, dtype=th.float32), th.as_tensor(shifts, dtype=th.float32)
 
 
 def cpu_seconds() -> float:
@@ -207,12 +255,13 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     optimizer = th.optim.Adam(actor.parameters(), lr=cfg.learning_rate)
     schedule = th.optim.lr_scheduler.CosineAnnealingLR(optimizer, cfg.epochs) if cfg.anneal_lr else None
     data = tensors(train)
+    symmetries = symmetry_tensors(layout) if cfg.augment else None
     with open(out_dir / "planner.csv", "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(COLUMNS)
         for epoch in range(cfg.epochs):
             actor.train()
-            loss = fit_epoch(actor, optimizer, data, cfg.batch_size, rng)
+            loss = fit_epoch(actor, optimizer, data, cfg.batch_size, rng, symmetries)
             if schedule is not None:
                 schedule.step()
             actor.eval()
