@@ -29,10 +29,9 @@ from evaluation.episodes import skip_reason
 from evaluation.handover import REFERENCES
 from evaluation.pool import parallel_map
 from evaluation.seeds import VALIDATION_SEED_START
-from policies import make_policy
 from policies.base import stack_observations
-from policies.handover import Handover
 from policies.local_plan import SOLVERS, LocalPlanPolicy
+from policies.registry import planner_pair
 from policies.round_zero import RoundZeroPlanner
 from taskalloc_env.allocation import on_paths
 from taskalloc_env.config import resolve_config
@@ -58,21 +57,9 @@ class FirstStates:
                    {label: np.concatenate([p.estimates[label] for p in parts]) for label in parts[0].estimates})
 
 
-def planner_pair(name: str) -> Handover:
-    """A planner checkpoint's policy: its round-0 planner (``first``) and the policy it hands over to (``then``);
-    ``ConfigError`` naming ``--planner`` for anything else."""
-    try:
-        policy = make_policy(name)
-    except ValueError as exc:       # a CheckpointError is a ConfigError already
-        raise ConfigError(f"--planner {name}: {exc}") from None
-    if not (isinstance(policy, Handover) and isinstance(policy.first, RoundZeroPlanner)):
-        raise ConfigError(f"--planner {name}: not a round-0 planner (a checkpoint written by training.planner)")
-    return policy
-
-
 def planner_of(name: str) -> RoundZeroPlanner:
     """The round-0 planner of a planner checkpoint's policy name (``ConfigError`` naming it otherwise)."""
-    return planner_pair(name).first
+    return planner_pair(name, "--planner").first
 
 
 def first_states(job: tuple[str, str, int, Sequence[str], Sequence[int]]) -> FirstStates:

@@ -19,10 +19,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from evaluation.episodes import evaluate
-from evaluation.plan_fit import planner_pair
 from evaluation.seeds import VALIDATION_SEED_START
 from evaluation.stats import format_p, paired
 from policies.handover import Handover
+from policies.registry import planner_pair
 from policies.round_zero import is_threshold
 from taskalloc_env.config import resolve_config
 from taskalloc_env.errors import ConfigError, run_cli
@@ -45,7 +45,7 @@ def main(argv: Sequence[str] | None = None) -> str:
     bad = [t for t in args.thresholds if not is_threshold(t)]
     if bad:
         raise ConfigError(f"--thresholds: got {bad}; allowed: numbers in (0, 1)")
-    pair = planner_pair(args.planner)
+    pair = planner_pair(args.planner, "--planner")
     planner, follower = pair.first, pair.then
     seeds = list(range(args.seed_start, args.seed_start + args.episodes))
     env_kwargs = {"scenario": resolve_config(args.scenario)}

@@ -72,7 +72,9 @@ def make_policy(name: str, **kwargs) -> Policy:
 def load_learned(source: str, planner_allowed: bool = True, **kwargs: Any) -> Policy:
     """``learned:<source>``: a ``LearnedPolicy``, or for a round-0 planner's checkpoint (``policies.round_zero``)
     the planner handed over after round 0 to the policy its meta names, which may not be a planner itself (it would
-    load without end). ``kwargs`` are ``LearnedPolicy.load``'s options; a planner takes none."""
+    load without end). A bidder trained with a partner (``training.mappo``'s ``round_zero`` and ``later_rounds``)
+    loads as the pair it was trained in: after the planner its meta names in ``round_zero``, or before the policy it
+    names in ``then``. ``kwargs`` are ``LearnedPolicy.load``'s options; a planner takes none."""
     from policies.checkpoint import CheckpointError, load
     from policies.handover import Handover
     from policies.learned import LearnedPolicy, resolve
@@ -81,7 +83,23 @@ def load_learned(source: str, planner_allowed: bool = True, **kwargs: Any) -> Po
     checkpoint = load(resolve(source), allow_pickle=kwargs.pop("allow_pickle", False))
     name = kwargs.pop("name", None) or f"learned:{source}"
     if checkpoint.meta.get("algo") != PLANNER:
-        return LearnedPolicy.from_checkpoint(checkpoint, name=name, **kwargs)
+        bidder = LearnedPolicy.from_checkpoint(checkpoint, name=name, **kwargs)
+        partner = {key: checkpoint.meta[key] for key in ("round_zero", "then") if checkpoint.meta.get(key) is not None}
+        if not partner:
+            return bidder
+        if len(partner) > 1 or not all(isinstance(v, str) for v in partner.values()):
+            raise CheckpointError(f"{source}: a bidder's meta names the planner it was trained after ('round_zero') "
+                                  f"or the policy that plays after its round 0 ('then'), one policy name; got "
+                                  f"{partner}")
+        if "round_zero" in partner:
+            policy = Handover(planner_pair(partner["round_zero"], f"{source}: meta 'round_zero'").first, bidder, 1)
+        else:
+            try:
+                policy = Handover(bidder, make_policy(partner["then"]), 1)
+            except ValueError as exc:
+                raise CheckpointError(f"{source}: meta 'then' {partner['then']}: {exc}") from None
+        policy.name = name
+        return policy
     if not planner_allowed:
         raise CheckpointError(f"{source}: a planner's 'then' is itself a planner; it must be a bidding policy")
     then, threshold, replan = planner_meta(checkpoint, source)
@@ -93,4 +111,21 @@ def load_learned(source: str, planner_allowed: bool = True, **kwargs: Any) -> Po
                 else make_policy(then))
     policy = Handover(planner, follower, 1)
     policy.name = name
+    return policy
+
+
+def planner_pair(name: str, where: str) -> Any:
+    """The ``Handover`` a round-0 planner's policy name (``learned:<planner checkpoint>``, ``training.planner``)
+    loads as: its planner (``first``) and the policy it hands over to (``then``); ``ConfigError`` naming ``where``
+    for any other name."""
+    from policies.handover import Handover
+    from policies.round_zero import RoundZeroPlanner
+    from taskalloc_env.errors import ConfigError
+
+    try:
+        policy = make_policy(name)
+    except ValueError as exc:       # a CheckpointError is a ConfigError already
+        raise ConfigError(f"{where} {name}: {exc}") from None
+    if not (isinstance(policy, Handover) and isinstance(policy.first, RoundZeroPlanner)):
+        raise ConfigError(f"{where} {name}: not a round-0 planner (a checkpoint written by training.planner)")
     return policy

@@ -16,6 +16,16 @@ Games"):
 * only real decisions train the actor: an agent whose mask allows a single action (it has passed in this round,
   or nothing is open to it) contributes nothing to the policy loss or the entropy (its ratio is 1 either way).
 
+A bidder for after a planned round 0 (``round_zero``, ours): a round-0 planner (``training.planner``) plays round 0
+of every training episode for every agent, as part of the environment's dynamics, and the actor learns the rounds
+after it, from the states the planner leaves (a bidder trained from its own round 0 never sees those). The team
+score gained in round 0 is the planner's, so it is no part of the actor's return. The checkpoint names the planner
+(meta ``round_zero``) and ``learned:<run>`` loads as the pair, as the evaluation plays it. The mirror,
+``later_rounds``: a fixed policy plays every round after round 0 and the actor learns round 0 alone, its return the
+team score the whole episode ends with (meta ``then``). Started from a round-0 planner's checkpoint (``init_from``,
+its pass logit set to 0 so that the policy's arg-max is the planner's rule), this fine-tunes the planner on the team
+score itself instead of on the solver's labels.
+
 Sizes: ``mixture`` lists scenarios (each with its overrides, number of env copies and ``from_steps``, the agent
 steps after which it joins: a curriculum). Every rollout collects ``n_steps`` steps from every copy of every active
 entry; minibatches never mix sizes. Rewards are the change of the team score divided by c̄ · N (reward × agents),
@@ -48,9 +58,12 @@ from torch import nn
 from evaluation.episodes import evaluate, summarise
 from evaluation.seeds import TEST_SEEDS, VALIDATION_SEED_START
 from policies import checkpoint, make_policy
-from policies.base import stack_observations
+from policies.base import Policy, stack_observations
+from policies.handover import Handover
 from policies.learned import LearnedPolicy, resolve
 from policies.networks import AttentionActor, PoolingActor, count_parameters
+from policies.registry import planner_pair
+from policies.round_zero import PLANNER
 from taskalloc_env.config import resolve_config
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
@@ -100,6 +113,10 @@ class MappoConfig:
     layers: int = opt(2, "self-attention layers of the attention actor")
     init_from: str | None = opt(None, "start from a run's actor and critic (a run folder with model.json and "
                                       "critic.safetensors; a committed model's name or a checkpoint: the actor only)")
+    round_zero: str | None = opt(None, "a round-0 planner (learned:<planner checkpoint>, training.planner) that "
+                                       "plays round 0 for every agent; the actor learns the rounds after it")
+    later_rounds: str | None = opt(None, "a policy that plays every round after round 0; the actor learns round 0 "
+                                         "alone (e.g. a round-0 planner, init_from its checkpoint)")
     # PPO
     total_steps: int = opt(1_000_000, "agent steps (one agent's decision in one env step) to train for")
     n_steps: int = opt(64, "steps per env copy in one rollout")
@@ -129,6 +146,9 @@ class MappoConfig:
         check_actor(self)
         check_protocol_options(self, "; scenario fields and network conditions go into the mixture entries' "
                                      "overrides")
+        if self.round_zero is not None and self.later_rounds is not None:
+            raise ConfigError("training fields 'round_zero' and 'later_rounds': give at most one (the actor learns "
+                              "the rounds after round 0, or round 0 alone)")
         if not self.mixture:
             raise ConfigError("training field 'mixture': needs at least one entry")
         for entry in self.mixture:
@@ -154,12 +174,29 @@ def load_config(argv: Sequence[str] | None = None) -> MappoConfig:
 
 
 # -- environments: one group of copies per mixture entry ----------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class Partner:
+    """The policy that plays the rounds the actor does not learn: round 0 (``round_zero``) or every round after it
+    (``later_rounds``), as part of the environment's dynamics."""
+
+    policy: Policy
+    round_zero: bool
+
+    def plays(self, round_: int) -> bool:
+        return (round_ == 0) == self.round_zero
+
+    def with_actor(self, bidder: Policy) -> Policy:
+        """The actor as it plays, with its partner (what its checkpoint loads as)."""
+        return Handover(self.policy, bidder, 1) if self.round_zero else Handover(bidder, self.policy, 1)
+
+
 class Group:
     """The env copies of one mixture entry (one size), stepped together; rewards in units of c̄ · N."""
 
     def __init__(self, entry: Mapping[str, Any], env_overrides: Mapping[str, Any], max_cycles: int,
-                 first_seed: int) -> None:
+                 first_seed: int, partner: Partner | None = None) -> None:
         self.label = str(entry.get("label") or entry["scenario"])
+        self.partner = partner
         self.from_steps = int(entry.get("from_steps", 0))
         config = resolve_config(entry["scenario"], **dict(entry.get("overrides") or {}))
         self.env_kwargs = {"scenario": config, **env_overrides}
@@ -177,24 +214,52 @@ class Group:
 
     def reset(self) -> None:
         """Copy i starts from seed ``first_seed + i``; later episodes continue that copy's generator."""
-        rows = [self._observe(env, env.reset(seed=self.first_seed + i)[0]) for i, env in enumerate(self.envs)]
+        rows = [self._observe(env, self._begin(env, self.first_seed + i)) for i, env in enumerate(self.envs)]
         self.obs, self.masks, self.states = (np.stack(x) for x in zip(*rows))
+
+    def _begin(self, env: TaskAllocEnv, seed: int | None = None) -> Mapping[str, Any]:
+        """A new episode's observations where the actor first acts: at the start, or after its partner's round 0
+        (an episode that ends within it counts as played and is followed by the next)."""
+        obs, infos = env.reset(seed=seed)
+        if self.partner is None:
+            return obs
+        self.partner.policy.start(env)
+        obs, infos, _, _ = self._partner_plays(env, obs, infos)
+        if not env.agents:
+            self.scores.append(infos[self.agents[0]]["score"])
+            return self._begin(env)
+        return obs
+
+    def _partner_plays(self, env: TaskAllocEnv, obs: Mapping[str, Any], infos: Mapping[str, Any]
+                       ) -> tuple[Mapping[str, Any], Mapping[str, Any], float, bool]:
+        """The partner's steps while it plays the current round: the observations and infos where it stops, the
+        team reward it earned, and whether max_cycles cut the episode there."""
+        gain, cut = 0.0, False
+        while env.agents and self.partner is not None and self.partner.plays(infos[self.agents[0]]["round"]):
+            obs, reward, terminated, truncated, infos = env.step(self.partner.policy.act(obs, infos))
+            gain += reward[self.agents[0]]
+            cut = all(truncated.values()) and not all(terminated.values())
+        return obs, infos, gain, cut
 
     def _observe(self, env: TaskAllocEnv, obs: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return (*stack_observations(obs, self.agents), env.state())
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[np.ndarray | None]]:
-        """Step every copy; (rewards (C,), episode ends (C,), the last state of each copy cut by max_cycles)."""
+        """Step every copy (and the partner's rounds that follow); (rewards (C,), episode ends (C,), the last state
+        of each copy cut by max_cycles)."""
         rewards, dones, cut = np.zeros(len(self.envs)), np.zeros(len(self.envs), dtype=bool), []
         for i, env in enumerate(self.envs):
             obs, reward, terminated, truncated, infos = env.step(dict(zip(self.agents, actions[i].tolist())))
             rewards[i] = reward[self.agents[0]]
             ended_by_limit = all(truncated.values()) and not all(terminated.values())
+            if env.agents:      # the rest of the episode may be the partner's (later_rounds)
+                obs, infos, gain, ended_by_limit = self._partner_plays(env, obs, infos)
+                rewards[i] += gain
             cut.append(env.state() if ended_by_limit else None)
             if not env.agents:
                 dones[i] = True
                 self.scores.append(infos[self.agents[0]]["score"])
-                obs, _ = env.reset()
+                obs = self._begin(env)
             self.obs[i], self.masks[i], self.states[i] = self._observe(env, obs)
         return rewards, dones, cut
 
@@ -362,7 +427,7 @@ class Evaluator:
 
     def __call__(self, model: ActorCritic, steps: int, wall: float) -> dict[str, float]:
         """One row per entry; returns the score ratio to the baseline per entry."""
-        policy = as_learned(model.actor, self.groups[0], self.cfg)
+        policy = as_played(as_learned(model.actor, self.groups[0], self.cfg), self.groups[0].partner)
         model.actor.eval()
         ratios = {}
         with open(self.path, "a", newline="") as fh:
@@ -380,7 +445,8 @@ def load_weights(model: ActorCritic, source: str) -> list[str]:
     """Start from a checkpoint's actor weights and, when its folder holds one, its critic (``init_from``)."""
     json_path = Path(str(resolve(source)))
     json_path = json_path / "model.json" if json_path.is_dir() else json_path.with_suffix(".json")
-    states = [("actor", model.actor, checkpoint.load(json_path).actor.state_dict())]
+    source_checkpoint = checkpoint.load(json_path)
+    states = [("actor", model.actor, source_checkpoint.actor.state_dict())]
     if (json_path.parent / CRITIC_FILE).is_file():
         states.append(("critic", model.critic, load_file(str(json_path.parent / CRITIC_FILE))))
     for name, module, state in states:
@@ -389,11 +455,43 @@ def load_weights(model: ActorCritic, source: str) -> list[str]:
         except RuntimeError as exc:
             raise ConfigError(f"init_from {source}: its {name} does not fit this run's networks (actor, hidden, "
                               f"heads, layers): {str(exc).splitlines()[0]}") from None
+    if source_checkpoint.meta.get("algo") == PLANNER:
+        # a planner fitted its bid logits as log-odds and never its pass logit: with the pass logit at 0 the arg-max
+        # of the actor's policy is the planner's rule at threshold ½ (bid the likeliest task while p ≥ ½)
+        pass_layer = model.actor.output_layers()[-1]
+        with th.no_grad():
+            pass_layer.weight.zero_()
+            pass_layer.bias.zero_()
     return [name for name, _, _ in states]
 
 
 def as_learned(actor: nn.Module, group: Group, cfg: MappoConfig) -> LearnedPolicy:
     return LearnedPolicy(actor, group.layout.own_names, group.layout.task_names, cfg.env_overrides, name=cfg.name)
+
+
+def as_played(bidder: LearnedPolicy, partner: Partner | None) -> Policy:
+    """The bidder as it plays, with the run's partner when it has one (what its checkpoint loads as)."""
+    return bidder if partner is None else partner.with_actor(bidder)
+
+
+def load_partner(cfg: MappoConfig) -> Partner | None:
+    """The policy of ``round_zero`` (a round-0 planner) or ``later_rounds`` (any policy), checked: it plays with
+    the run's protocol options."""
+    if cfg.round_zero is not None:
+        field, policy = "round_zero", planner_pair(cfg.round_zero, "training field 'round_zero':").first
+    elif cfg.later_rounds is not None:
+        field = "later_rounds"
+        try:
+            policy = make_policy(cfg.later_rounds)
+        except ValueError as exc:       # a CheckpointError is a ConfigError already
+            raise ConfigError(f"training field 'later_rounds': {exc}") from None
+    else:
+        return None
+    clash = {k: v for k, v in policy.env_overrides.items() if cfg.env_overrides.get(k, v) != v}
+    if clash:
+        raise ConfigError(f"training field '{field}': {getattr(cfg, field)} plays with {clash}, the run with "
+                          f"env_overrides {cfg.env_overrides}")
+    return Partner(policy, round_zero=field == "round_zero")
 
 
 def save_actor(stem: Path, actor: nn.Module, group: Group, cfg: MappoConfig, meta: Mapping[str, Any]) -> Path:
@@ -414,9 +512,9 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     t_start, cpu_start = time.perf_counter(), time.process_time()
 
     # -- environments: one group of copies per mixture entry ----------------------------------------------------------
-    groups, first = [], cfg.seed * 1000
+    groups, first, partner = [], cfg.seed * 1000, load_partner(cfg)
     for entry in cfg.mixture:
-        groups.append(Group(entry, cfg.env_overrides, cfg.max_cycles, first))
+        groups.append(Group(entry, cfg.env_overrides, cfg.max_cycles, first, partner))
         first += len(groups[-1].envs)
     layout = groups[0].layout
     for g in groups:
@@ -472,7 +570,9 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     ratios = evaluator(model, steps, seconds)
     save_actor(out_dir / "model", model.actor, groups[0], cfg,
                {"name": cfg.name, "algo": "mappo", "seed": cfg.seed, "steps": steps,
-                "mixture": [g.label for g in groups], "init_from": cfg.init_from})
+                "mixture": [g.label for g in groups], "init_from": cfg.init_from,
+                **({"round_zero": cfg.round_zero} if cfg.round_zero else {}),
+                **({"then": cfg.later_rounds} if cfg.later_rounds else {})})
     save_file({k: v.contiguous() for k, v in model.critic.state_dict().items()}, str(out_dir / CRITIC_FILE))
     summary.update(steps=steps, env_steps=env_steps, updates=update_i, train_seconds=round(seconds, 1),
                    agent_steps_per_second=round(steps / seconds, 1) if seconds else None,
