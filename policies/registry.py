@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import Any
 
 from policies.base import Policy
+from policies.handover import Handover
 from policies.oracle import OraclePolicy
 from policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
 
@@ -76,7 +77,6 @@ def load_learned(source: str, planner_allowed: bool = True, **kwargs: Any) -> Po
     loads as the pair it was trained in: after the planner its meta names in ``round_zero``, or before the policy it
     names in ``then``. ``kwargs`` are ``LearnedPolicy.load``'s options; a planner takes none."""
     from policies.checkpoint import CheckpointError, load
-    from policies.handover import Handover
     from policies.learned import LearnedPolicy, resolve
     from policies.round_zero import PLANNER, RoundZeroPlanner, planner_meta
 
@@ -114,11 +114,10 @@ def load_learned(source: str, planner_allowed: bool = True, **kwargs: Any) -> Po
     return policy
 
 
-def planner_pair(name: str, where: str) -> Any:
+def planner_pair(name: str, where: str) -> Handover:
     """The ``Handover`` a round-0 planner's policy name (``learned:<planner checkpoint>``, ``training.planner``)
     loads as: its planner (``first``) and the policy it hands over to (``then``); ``ConfigError`` naming ``where``
     for any other name."""
-    from policies.handover import Handover
     from policies.round_zero import RoundZeroPlanner
     from taskalloc_env.errors import ConfigError
 

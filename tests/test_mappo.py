@@ -254,8 +254,9 @@ def test_round_zero_must_be_a_planner_that_plays_with_the_run(tmp_path, capsys):
             mappo.load_partner(small_config(round_zero=value))
     with pytest.raises(ConfigError, match="plays with"):
         mappo.load_partner(small_config(round_zero=PLANNER, env_overrides={"task_quitting": False}))
-    with pytest.raises(ConfigError, match="plays with"):
-        mappo.load_partner(small_config(later_rounds="cbgabi", env_overrides={"task_quitting": False}))
+    for overrides in ({"task_quitting": False}, {}):       # a different value, or none at all
+        with pytest.raises(ConfigError, match="plays with"):
+            mappo.load_partner(small_config(later_rounds="cbgabi", env_overrides=overrides))
     with pytest.raises(ConfigError, match="unknown policy"):
         mappo.load_partner(small_config(later_rounds="cbgx"))
     with pytest.raises(ConfigError, match="at most one"):

@@ -111,8 +111,9 @@ class MappoConfig:
     hidden: int = opt(64, "width of the actor and the critic")
     heads: int = opt(4, "attention heads (attention actor and critic)")
     layers: int = opt(2, "self-attention layers of the attention actor")
-    init_from: str | None = opt(None, "start from a run's actor and critic (a run folder with model.json and "
-                                      "critic.safetensors; a committed model's name or a checkpoint: the actor only)")
+    init_from: str | None = opt(None, "start from a checkpoint's actor, and its critic when its folder holds "
+                                      "critic.safetensors (a run folder or a committed model's name; a round-0 "
+                                      "planner's pass logit is set to 0)")
     round_zero: str | None = opt(None, "a round-0 planner (learned:<planner checkpoint>, training.planner) that "
                                        "plays round 0 for every agent; the actor learns the rounds after it")
     later_rounds: str | None = opt(None, "a policy that plays every round after round 0; the actor learns round 0 "
@@ -487,10 +488,10 @@ def load_partner(cfg: MappoConfig) -> Partner | None:
             raise ConfigError(f"training field 'later_rounds': {exc}") from None
     else:
         return None
-    clash = {k: v for k, v in policy.env_overrides.items() if cfg.env_overrides.get(k, v) != v}
+    clash = {k: v for k, v in policy.env_overrides.items() if k not in cfg.env_overrides or cfg.env_overrides[k] != v}
     if clash:
-        raise ConfigError(f"training field '{field}': {getattr(cfg, field)} plays with {clash}, the run with "
-                          f"env_overrides {cfg.env_overrides}")
+        raise ConfigError(f"training field '{field}': {getattr(cfg, field)} plays with {clash}; the run's "
+                          f"env_overrides {cfg.env_overrides} must hold them")
     return Partner(policy, round_zero=field == "round_zero")
 
 
