@@ -94,6 +94,8 @@ PLANNER = Config("round-0 planner learned from LNS on 10 × 20 (ours), then MAPP
                  {0: "planner_default"})
 PLANNER_SMALL = Config("round-0 planner, attention, learned from the optimum on 4 × 8 (ours), then MAPPO pooling 1 M",
                        "planner_small_attention", {0: "planner_small_attention"})
+AFTER_PLANNER = Config("round-0 planner, attention (ours), then MAPPO pooling 1 M trained after that round 0 (ours)",
+                       "mappo_after_planner_small", {0: "mappo_after_planner_small"})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,10 +117,10 @@ class Setting:
 SETTINGS = {s.name: s for s in (
     Setting("train_small", "training scenario, 4 × 8, L_j ∈ {1, 2}", "train_small", {},
             (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING, PLANNER,
-             PLANNER_SMALL), behaviour_cloning=True),
+             PLANNER_SMALL, AFTER_PLANNER), behaviour_cloning=True),
     Setting("default", "default scenario, 10 × 20, L_j = 4", "default", {},
             (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING, PLANNER,
-             PLANNER_SMALL)),
+             PLANNER_SMALL, AFTER_PLANNER)),
     Setting("size_8x16", "8 × 16, L_j = 3 (no model trained on it)", "default",
             {"n_agents": 8, "n_tasks": 16, "agents_per_task": 3}, (POOLING_1M, ATTENTION, MIXTURE)),
     Setting("size_20x40", "20 × 40, L_j = 4 (no model trained on it)", "default",
