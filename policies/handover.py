@@ -51,3 +51,9 @@ class Handover(Policy):
             raise ValueError(f"{self.name} hands over by the round in the agents' infos; pass them to act")
         current = infos[next(iter(observations))]["round"]
         return (self.first if current < self.rounds else self.then).act(observations, infos)
+
+
+def with_partner(bidder: Policy, partner: Policy, partner_plays_round_zero: bool) -> Handover:
+    """A bidder trained with a fixed partner (``training.mappo``'s ``round_zero`` / ``later_rounds``), as it plays:
+    the partner in round 0 and the bidder after it, or the bidder in round 0 and the partner after it."""
+    return Handover(partner, bidder, 1) if partner_plays_round_zero else Handover(bidder, partner, 1)

@@ -12,7 +12,7 @@ from collections.abc import Callable
 from typing import Any
 
 from policies.base import Policy
-from policies.handover import Handover
+from policies.handover import Handover, with_partner
 from policies.oracle import OraclePolicy
 from policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
 
@@ -92,10 +92,11 @@ def load_learned(source: str, planner_allowed: bool = True, **kwargs: Any) -> Po
                                   f"or the policy that plays after its round 0 ('then'), one policy name; got "
                                   f"{partner}")
         if "round_zero" in partner:
-            policy = Handover(planner_pair(partner["round_zero"], f"{source}: meta 'round_zero'").first, bidder, 1)
+            policy = with_partner(bidder, planner_pair(partner["round_zero"], f"{source}: meta 'round_zero'").first,
+                                  True)
         else:
             try:
-                policy = Handover(bidder, make_policy(partner["then"]), 1)
+                policy = with_partner(bidder, make_policy(partner["then"]), False)
             except ValueError as exc:
                 raise CheckpointError(f"{source}: meta 'then' {partner['then']}: {exc}") from None
         policy.name = name

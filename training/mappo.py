@@ -59,7 +59,7 @@ from evaluation.episodes import evaluate, summarise
 from evaluation.seeds import TEST_SEEDS, VALIDATION_SEED_START
 from policies import checkpoint, make_policy
 from policies.base import Policy, stack_observations
-from policies.handover import Handover
+from policies.handover import with_partner
 from policies.learned import LearnedPolicy, resolve
 from policies.networks import AttentionActor, PoolingActor, count_parameters
 from policies.registry import planner_pair
@@ -188,7 +188,7 @@ class Partner:
 
     def with_actor(self, bidder: Policy) -> Policy:
         """The actor as it plays, with its partner (what its checkpoint loads as)."""
-        return Handover(self.policy, bidder, 1) if self.round_zero else Handover(bidder, self.policy, 1)
+        return with_partner(bidder, self.policy, self.round_zero)
 
 
 class Group:
@@ -236,7 +236,7 @@ class Group:
         """The partner's steps while it plays the current round: the observations and infos where it stops, the
         team reward it earned, and whether max_cycles cut the episode there."""
         gain, cut = 0.0, False
-        while env.agents and self.partner is not None and self.partner.plays(infos[self.agents[0]]["round"]):
+        while env.agents and self.partner.plays(infos[self.agents[0]]["round"]):
             obs, reward, terminated, truncated, infos = env.step(self.partner.policy.act(obs, infos))
             gain += reward[self.agents[0]]
             cut = all(truncated.values()) and not all(terminated.values())
@@ -253,7 +253,7 @@ class Group:
             obs, reward, terminated, truncated, infos = env.step(dict(zip(self.agents, actions[i].tolist())))
             rewards[i] = reward[self.agents[0]]
             ended_by_limit = all(truncated.values()) and not all(terminated.values())
-            if env.agents:      # the rest of the episode may be the partner's (later_rounds)
+            if env.agents and self.partner is not None:     # the rest may be the partner's (later_rounds)
                 obs, infos, gain, ended_by_limit = self._partner_plays(env, obs, infos)
                 rewards[i] += gain
             cut.append(env.state() if ended_by_limit else None)
