@@ -28,8 +28,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from evaluation.report import markdown_table
-from policies import make_policy, rollout, sgama
+from taskalloc.evaluation.report import markdown_table
+from taskalloc.policies import make_policy, rollout, sgama
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.errors import run_cli
 

@@ -8,10 +8,11 @@ Every time is CPU time of this process (``time.process_time``), so a busy machin
 time would; they are still only comparable within one machine. Each section prints a markdown table:
 
 - reference: CBBA side by side with the public CBBA-Python on its own instances (``benchmarks.cbba_python``; only
-  with ``--reference``), ours in both consensus modes through the env and through ``policies.fast.solve``.
+  with ``--reference``), ours in both consensus modes through the env and through ``taskalloc.policies.fast.solve``.
 - env: agent-steps per CPU second of the default scenario with the random masked policy, and a whole scripted CBGA
   and CBGABI episode of the default scenario (env rollout and direct solve), the fastest of ``--repeats`` timings.
-- scaling: one solve (``policies.fast.solve``) of CBBA (L_j = 1), CBGA and CBGABI (L_j = 4) over N = 10…100 agents at
+- scaling: one solve (``taskalloc.policies.fast.solve``) of CBBA (L_j = 1), CBGA and CBGABI (L_j = 4) over N = 10…100
+agents at
   M = 2N tasks and M = N…5N at the largest N, with the exponents of N and M fitted by least squares on
   log t = c + a log N + b log M (per solve and per consensus round), on all sizes and on those with N ≥ half the
   largest (fixed costs flatten the small ones).
@@ -21,7 +22,7 @@ time would; they are still only comparable within one machine. Each section prin
   of the dense (holder, agent, task) float64 array it replaced (N·N·M).
 - strategies: the default scenario with CBGA under each network strategy, as ratios to perfect links.
 
-In a tree without ``policies.fast`` (the one before the speed work) the solves are whole env episodes instead.
+In a tree without ``taskalloc.policies.fast`` (the one before the speed work) the solves are whole env episodes instead.
 """
 
 from __future__ import annotations
@@ -39,8 +40,8 @@ import numpy as np
 
 from benchmarks.bench_allocation_time import machine
 from benchmarks.cbba_python import SIZES, load_reference, reference_table, solve
-from evaluation.report import markdown_table
-from policies import make_policy, rollout
+from taskalloc.evaluation.report import markdown_table
+from taskalloc.policies import make_policy, rollout
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.errors import ConfigError, run_cli
@@ -71,7 +72,8 @@ def cpu(run: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[Any, float]
 
 
 def allocate(env: TaskAllocEnv, policy: Any, seed: int) -> Allocation:
-    """The seed's allocation: ``policies.fast.solve`` on the seed's instance, or a whole episode without it."""
+    """The seed's allocation: ``taskalloc.policies.fast.solve`` on the seed's instance, or a whole episode without
+    it."""
     if solve is None:
         return rollout(env, policy, seed=seed)
     env.reset(seed=seed)
@@ -265,7 +267,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     reference = load_reference(args.reference) if args.reference and "reference" in sections else None
 
     print(f"machine: {machine()}; CPU time (time.process_time); fast path: "
-          f"{'policies.fast.solve' if solve else 'none (env episodes)'}\n", flush=True)
+          f"{'taskalloc.policies.fast.solve' if solve else 'none (env episodes)'}\n", flush=True)
     if reference:
         sizes = [s for s in SIZES if s[0] <= max_agents and s[1] <= max_tasks]
         print(f"## CBBA against CBBA-Python (median CPU s of {args.runs} instances)\n\n"

@@ -8,11 +8,12 @@
 Every algorithm trains on ``train_small`` (4 agents) for about ``--steps`` agent steps from a fresh network, one
 torch thread unless ``--torch-threads`` says otherwise (SB3):
 
-* ``sb3``: ``training.train`` with ``configs/training/train_small.yaml`` (MaskablePPO, pooling actor and a critic
+* ``sb3``: ``taskalloc.training.train`` with ``configs/training/train_small.yaml`` (MaskablePPO, pooling actor and a
+critic
   on the local observation, 8 copies = 32 slots, 10 epochs);
-* ``mappo``: ``training.mappo`` with ``configs/training/mappo_small.yaml`` (attention actor, critic on
+* ``mappo``: ``taskalloc.training.mappo`` with ``configs/training/mappo_small.yaml`` (attention actor, critic on
   ``env.state()``, 16 copies, 8 epochs), and with ``mappo_small_pooling.yaml`` (pooling actor);
-* ``rllib``: ``training.rllib_ppo`` (RLlib PPO, new API stack, attention actor, sampling in the driver process
+* ``rllib``: ``taskalloc.training.rllib_ppo`` (RLlib PPO, new API stack, attention actor, sampling in the driver process
   with 4 env copies, 4 epochs), including its own framework overhead but not Ray's start.
 
 An *agent step* is one decision of one agent in one env step (what SB3 and RLlib count as agent timesteps); *env
@@ -37,8 +38,8 @@ AGENTS = 4      # train_small
 
 
 def bench_sb3(steps: int, n_procs: int, out_dir: str, torch_threads: int = 1) -> dict[str, float]:
-    from training.train import build_model, load_config
-    from training.vec_env import TaskAllocVecEnv, make_env_fns
+    from taskalloc.training.train import build_model, load_config
+    from taskalloc.training.vec_env import TaskAllocVecEnv, make_env_fns
 
     cfg = load_config(["--config", "train_small", "--n-procs", str(n_procs), "--tensorboard", "false",
                        "--progress-bar", "false", "--out-dir", out_dir, "--torch-threads", str(torch_threads)])
@@ -53,7 +54,7 @@ def bench_sb3(steps: int, n_procs: int, out_dir: str, torch_threads: int = 1) ->
 
 
 def bench_mappo(steps: int, config: str, out_dir: str) -> dict[str, float]:
-    from training import mappo
+    from taskalloc.training import mappo
 
     summary = mappo.main(["--config", config, "--total-steps", str(steps), "--eval-freq", "0", "--eval-episodes",
                           "1", "--out-dir", out_dir])
@@ -61,7 +62,7 @@ def bench_mappo(steps: int, config: str, out_dir: str) -> dict[str, float]:
 
 
 def bench_rllib(steps: int, out_dir: str) -> dict[str, float]:
-    from training import rllib_ppo
+    from taskalloc.training import rllib_ppo
 
     batch = 1024                            # env steps per iteration = 4096 agent steps
     summary = rllib_ppo.main(["train", "--out-dir", out_dir, "--iterations",

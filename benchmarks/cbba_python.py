@@ -8,11 +8,11 @@ fixed ``Scenario`` (same positions, speeds, windows, durations, rewards; agent a
 as the reference scores it: reward · exp(−λ (start − window start)) with λ = 0.1, start times of planned tasks frozen
 (``marginal_gain="frozen"``), no travel cost (γ = 0). Both solve it with CBBA: the reference's ``CBBA.solve``, and
 this project's CBBA policy in each consensus mode (``sync``, the default, and ``every_step``), both through the
-environment (``rollout``) and through the protocol directly (``policies.fast.solve``, the experiments' path). Runs
-alternate (reference, env, direct, …) and the medians of CPU time (``time.process_time``) are compared in the same
-run, so the ratios hold on a busy machine. The allocations are not always equal: the reference breaks ties within
-ε and towards lower ids and prunes infeasible tasks its own way, so the table counts the instances whose paths are
-equal, those whose scores are equal, and the mean score ratio (ours / reference, both scored by this project's scorer).
+environment (``rollout``) and through the protocol directly (``taskalloc.policies.fast.solve``, the experiments' path).
+Runs alternate (reference, env, direct, …) and the medians of CPU time (``time.process_time``) are compared in the same
+run, so the ratios hold on a busy machine. The allocations are not always equal: the reference breaks ties within ε and
+towards lower ids and prunes infeasible tasks its own way, so the table counts the instances whose paths are equal,
+those whose scores are equal, and the mean score ratio (ours / reference, both scored by this project's scorer).
 """
 
 from __future__ import annotations
@@ -31,13 +31,13 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.report import markdown_table
-from policies import make_policy, rollout
+from taskalloc.evaluation.report import markdown_table
+from taskalloc.policies import make_policy, rollout
 from taskalloc_env import Agent, Scenario, Task, TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
 
 try:
-    from policies.fast import solve
+    from taskalloc.policies.fast import solve
 except ImportError:         # the tree before the speed work (for before/after figures): env rollouts only
     solve = None
 

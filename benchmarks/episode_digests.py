@@ -5,11 +5,11 @@
     (cd ../before && PYTHONPATH=$PWD python ../taskalloc/benchmarks/episode_digests.py --episodes 1000) > before.txt
     diff before.txt after.txt                   # no output: every episode is the same, bit for bit
 
-Each episode draws a configuration with ``evaluation.fuzz.draw_config`` (every option: equipment, prerequisites,
-message loss and delay, drop-outs, pop-up tasks, ACBBA) and runs a policy from ``--policies`` in turn through the
-PettingZoo environment. The first digest covers every observation, action mask, reward, termination, truncation,
-info and ``state()`` from ``reset`` to the end, the second the final ``Allocation`` (paths, start times, groups,
-score, counters). A speed change that alters any value, in its last bit too, changes a line.
+Each episode draws a configuration with ``taskalloc.evaluation.fuzz.draw_config`` (every option: equipment,
+prerequisites, message loss and delay, drop-outs, pop-up tasks, ACBBA) and runs a policy from ``--policies`` in turn
+through the PettingZoo environment. The first digest covers every observation, action mask, reward, termination,
+truncation, info and ``state()`` from ``reset`` to the end, the second the final ``Allocation`` (paths, start times,
+groups, score, counters). A speed change that alters any value, in its last bit too, changes a line.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.fuzz import draw_config
-from policies import make_policy
+from taskalloc.evaluation.fuzz import draw_config
+from taskalloc.policies import make_policy
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
 

@@ -1,7 +1,7 @@
 """ACBBA against synchronous CBBA on random static scenarios: convergence, conflicts, equal allocations.
 
-    python -m evaluation.acbba_check                          # 1000 scenarios, perfect links
-    python -m evaluation.acbba_check --scenarios 300 --faults "{message_loss: 0.2, max_delay: 3}"
+    taskalloc acbba-check                          # 1000 scenarios, perfect links
+    taskalloc acbba-check --scenarios 300 --faults "{message_loss: 0.2, max_delay: 3}"
 
 Each seed draws a static scenario with single-agent tasks and DMG scores (``marginal_gain="frozen"``,
 ``distance_cost="from_start"``: Johnson §3.4.1, eq. (3.13)), 2–8 agents and 3–15 tasks, and runs ACBBA
@@ -10,11 +10,11 @@ converged (the network went quiet before T_max), agreement (every agent holds th
 task in two bundles), and, on perfect links, whether ACBBA's allocation equals CBBA's.
 
 A difference must be explained by the stated rule of docs/decisions.md ("CBBA = SGA holds except after stale
-information"): one of the two runs differs from the centralised greedy SGA (``policies.sgama``) *and* in that run an
-agent bid while a task it valued more was blocked only by a record of a bid its holder had already released.
-Every other difference is reported as unexplained (and the command exits with status 1). With ``--faults`` the
-verdict needs convergence and conflict-freedom; agreement is reported (a bid can stay unknown to an agent when its
-broadcast and every confirmation to that agent are lost, docs/decisions.md).
+information"): one of the two runs differs from the centralised greedy SGA (``taskalloc.policies.sgama``) *and* in that
+run an agent bid while a task it valued more was blocked only by a record of a bid its holder had already released.
+Every other difference is reported as unexplained (and the command exits with status 1). With ``--faults`` the verdict
+needs convergence and conflict-freedom; agreement is reported (a bid can stay unknown to an agent when its broadcast and
+every confirmation to that agent are lost, docs/decisions.md).
 """
 
 from __future__ import annotations
@@ -29,9 +29,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from evaluation.episodes import default_jobs
-from evaluation.pool import parallel_map
-from policies import make_policy, sgama
+from taskalloc.evaluation.episodes import default_jobs
+from taskalloc.evaluation.pool import parallel_map
+from taskalloc.policies import make_policy, sgama
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.cbba_table import NONE
@@ -146,7 +146,7 @@ def report(verdicts: Sequence[Verdict]) -> tuple[str, bool]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.acbba_check", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="taskalloc acbba-check", description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenarios", type=int, default=1000, help="random static scenarios (default 1000)")
     parser.add_argument("--first", type=int, default=0, help="the first seed (default 0)")
     parser.add_argument("--faults", type=yaml.safe_load, default={},

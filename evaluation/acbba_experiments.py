@@ -1,9 +1,9 @@
 """Johnson's ACBBA experiments (Johnson §4.1.3, Figs 4-2 to 4-5) and ACBBA against synchronous CBBA.
 
-    python -m evaluation.acbba_experiments profiles --seeds 20     # Figs 4-2, 4-3, 4-4: message profiles
-    python -m evaluation.acbba_experiments sweep --seeds 10        # Fig 4-5: messages, convergence, separation time
-    python -m evaluation.acbba_experiments versus --seeds 50       # ACBBA vs CBBA, perfect and faulty links
-    python -m evaluation.acbba_experiments all --overwrite         # the three, into results/acbba/ (replacing them)
+    taskalloc acbba-experiments profiles --seeds 20     # Figs 4-2, 4-3, 4-4: message profiles
+    taskalloc acbba-experiments sweep --seeds 10        # Fig 4-5: messages, convergence, separation time
+    taskalloc acbba-experiments versus --seeds 50       # ACBBA vs CBBA, perfect and faulty links
+    taskalloc acbba-experiments all --overwrite         # the three, into results/acbba/ (replacing them)
 
 Johnson's setting (§4.1.3, extraction lines 916–939): "8 agents, with a maximum bundle size of 5, bidding on 35
 tasks"; all tasks at the start (Fig 4-2), or "an initial allocation of 10 tasks ... then every 0.2 seconds after, a
@@ -24,7 +24,7 @@ Where the settings live: in this module, not in ``configs/experiments/``. ``JOHN
 (on top of the default scenario), ``PROFILES`` the pop-up schedules of Figs 4-2 to 4-4, ``SWEEP_TASKS`` and
 ``SWEEP_AGENTS`` the points of Fig 4-5, ``FAULTS`` the networks of the comparison with CBBA, ``DEFAULT_SEEDS`` the
 seeds per point, ``TICK_MS`` and ``BIN`` the units; the 1,000 random scenarios are ``acbba_check.scenario(seed)``.
-They are not experiment files because the experiment runner (``evaluation.experiments``) tabulates per-episode
+They are not experiment files because the experiment runner (``taskalloc.evaluation.experiments``) tabulates per-episode
 scalar metrics paired across series, while these figures need the per-broadcast tick log binned into profiles,
 bursts per pop-up, correlations across seeds, and a path-by-path comparison of two solvers' allocations on one seed;
 expressing them there would mean new metric kinds in the runner for three figures.
@@ -42,10 +42,10 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from evaluation.episodes import default_jobs
-from evaluation.pool import parallel_map
-from evaluation.report import markdown_table
-from policies import make_policy
+from taskalloc.evaluation.episodes import default_jobs
+from taskalloc.evaluation.pool import parallel_map
+from taskalloc.evaluation.report import markdown_table
+from taskalloc.policies import make_policy
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
 
@@ -266,7 +266,7 @@ DEFAULT_SEEDS = {"profiles": 20, "sweep": 10, "versus": 50}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.acbba_experiments",
+    parser = argparse.ArgumentParser(prog="taskalloc acbba-experiments",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("command", choices=[*COMMANDS, "all"])
     parser.add_argument("--seeds", type=int, default=None, help="seeds per point (defaults: 20, 10, 50)")

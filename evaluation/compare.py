@@ -1,17 +1,17 @@
-"""``python -m policies compare``: every baseline (and a committed learned policy) on the same seeds of a scenario.
+"""``taskalloc compare``: every baseline (and a committed learned policy) on the same seeds of a scenario.
 
-    python -m policies compare --scenario default --episodes 20 --out results/compare
+    taskalloc compare --scenario default --episodes 20 --out results/compare
 
 Rows: random, CBBA (only where every L_j = 1), CBGA, CBGA+TQ, CBGA+TB, CBGABI, the centralised greedy SGAMA
-(thesis §3.3.3, Alg 7; no rounds or messages), the centralised group search LNS (``policies.local_search``, ours: a
-lower bound on the optimum, how much there is to take) and, for every committed checkpoint ``models/<name>/model.json``
-whose observation layout fits the scenario, the learned policy. Seed s is the same instance for every row (paired
-design, thesis §5.3.1). The table gives mean ± sd of the score (``scoring.team_score``), valid tasks, consensus
-rounds and messages received (``msgs / agent`` = messages / N_n, the thesis's per-agent communication steps),
-episodes that hit the round bound (kept, counted), and the paired comparison with CBGA (mean difference, paired
-t-test p-value, share of seeds won). ``--out DIR`` writes ``compare.md``, ``compare.csv`` (the table),
-``episodes.csv`` and ``compare.png`` (score bars with sd; per-seed differences against CBGA); a folder that already
-holds files is refused unless ``--overwrite`` is given.
+(thesis §3.3.3, Alg 7; no rounds or messages), the centralised group search LNS (``taskalloc.policies.local_search``,
+ours: a lower bound on the optimum, how much there is to take) and, for every committed checkpoint
+``models/<name>/model.json`` whose observation layout fits the scenario, the learned policy. Seed s is the same instance
+for every row (paired design, thesis §5.3.1). The table gives mean ± sd of the score (``scoring.team_score``), valid
+tasks, consensus rounds and messages received (``msgs / agent`` = messages / N_n, the thesis's per-agent communication
+steps), episodes that hit the round bound (kept, counted), and the paired comparison with CBGA (mean difference, paired
+t-test p-value, share of seeds won). ``--out DIR`` writes ``compare.md``, ``compare.csv`` (the table), ``episodes.csv``
+and ``compare.png`` (score bars with sd; per-seed differences against CBGA); a folder that already holds files is
+refused unless ``--overwrite`` is given.
 """
 
 from __future__ import annotations
@@ -25,9 +25,9 @@ from typing import Any
 
 import yaml
 
-from evaluation.distributed import BACKENDS
-from evaluation.episodes import Episode, default_jobs, policy_for, run_episodes, skip_reason, solver_name
-from evaluation.report import (
+from taskalloc.evaluation.distributed import BACKENDS
+from taskalloc.evaluation.episodes import Episode, default_jobs, policy_for, run_episodes, skip_reason, solver_name
+from taskalloc.evaluation.report import (
     bar_and_differences,
     cell_text,
     compare_cells,
@@ -37,8 +37,8 @@ from evaluation.report import (
     values,
     write_csv,
 )
-from evaluation.stats import format_p, mean_sd
-from policies.checkpoint import CheckpointError
+from taskalloc.evaluation.stats import format_p, mean_sd
+from taskalloc.policies.checkpoint import CheckpointError
 from taskalloc_env import TaskAllocConfig, resolve_config, resources
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError
@@ -205,3 +205,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"written: {args.out}/compare.md, compare.csv, episodes.csv, compare.png")
     print(f"({time.perf_counter() - started:.1f} s)", file=sys.stderr)
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``taskalloc compare [ARGS]``."""
+    parser = argparse.ArgumentParser(prog="taskalloc compare", description=__doc__.split("\n\n")[0])
+    add_arguments(parser)
+    return run(parser.parse_args(argv))

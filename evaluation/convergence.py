@@ -1,7 +1,7 @@
 """How often greedy CBGA converges under each travel-cost and bid option (the evidence behind the defaults).
 
-    python -m evaluation.convergence                                 # the defaults' rows, 1000 seeds each
-    python -m evaluation.convergence --seeds 200 --all --out docs/convergence.md
+    taskalloc convergence                                 # the defaults' rows, 1000 seeds each
+    taskalloc convergence --seeds 200 --all --out docs/convergence.md
 
 CBBA's convergence and conflict-freedom rest on diminishing marginal gains (DMG, Johnson §3.4.1 eq. (3.13);
 thesis eq. (2.5)). The per-leg cost of thesis (3.9) (``distance_cost="leg"``: γ × the detour an insertion adds) is
@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from evaluation.episodes import Episode, default_jobs, run_episodes
-from evaluation.report import markdown_table
+from taskalloc.evaluation.episodes import Episode, default_jobs, run_episodes
+from taskalloc.evaluation.report import markdown_table
 from taskalloc_env import resolve_config
 from taskalloc_env.errors import ConfigError, run_cli
 
@@ -57,7 +57,7 @@ def table(rows: Sequence[tuple[str, str, bool]], policies: Sequence[str], levels
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.convergence", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="taskalloc convergence", description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=1000, help="seeds per row (default 1000)")
     parser.add_argument("--all", action="store_true",
                         help="every combination of distance_cost, marginal_gain and bid_warping (default: the "
@@ -77,7 +77,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     text = table(rows, args.policies.split(","), levels, args.seeds, args.jobs)
     print(text)
     if args.out:
-        command = "python -m evaluation.convergence " + " ".join(argv if argv is not None else [])
+        command = "taskalloc convergence " + " ".join(argv if argv is not None else [])
         args.out.write_text(f"<!-- written by `{command.strip()}` -->\n{text}")
     return 0
 

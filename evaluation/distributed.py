@@ -1,9 +1,10 @@
 """Episodes as Ray tasks: the ``ray`` backend of ``run_episodes`` (``--backend ray`` in compare and experiments).
 
-A sweep is cut into chunks of episodes; each chunk is one Ray task that runs ``evaluation.episodes.run_episode`` on
-its episodes, and the rows come back in the order of the episodes, so a table is byte for byte the one the local
-backend writes for the same seeds (every episode is a pure function of its solver, config and seed). Ray starts
-locally unless ``RAY_ADDRESS`` names a cluster (``ray start --head`` on one machine, ``ray start
+A sweep is cut into chunks of episodes; each chunk is one Ray task that runs
+``taskalloc.evaluation.episodes.run_episode`` on its episodes, and the rows come back in the order of the episodes, so a
+table is byte for byte the one the local backend writes for the same seeds (every episode is a pure function of its
+solver, config and seed). Ray starts locally unless ``RAY_ADDRESS`` names a cluster (``ray start --head`` on one
+machine, ``ray start
 --address=<head>:6379`` on the others; taskalloc must be installed on every node: ``pip install taskalloc[ray]``).
 A learned policy named by a path is read on the worker: it must exist there (committed models, named
 ``learned:<name>``, travel inside the package). Ray is imported only here, and only when this backend is used.

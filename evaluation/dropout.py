@@ -1,7 +1,7 @@
 """Drop-out against never-existed: one agent fails mid-auction; the team it leaves against a team it was never in.
 
-    python -m evaluation.dropout                         # 100 paired seeds per algorithm, agent fails at round 3
-    python -m evaluation.dropout --episodes 20 --round 5 --jobs 2
+    taskalloc dropout                         # 100 paired seeds per algorithm, agent fails at round 3
+    taskalloc dropout --episodes 20 --round 5 --jobs 2
 
 For each seed s and algorithm (CBBA on single-agent tasks, CBGA and CBGABI on the default scenario's L_j = 4), the
 instance of seed s runs three times:
@@ -12,11 +12,11 @@ instance of seed s runs three times:
   silence (default 2 (D + 1)) and clear its bids, so its tasks can be re-assigned (docs/algorithm.md §4.5);
 * ``never``: the same instance with agent k removed (a fixed ``Scenario`` without its row), so the team never had it.
 
-The table pairs ``dropout`` with ``never`` seed by seed (``evaluation.stats.paired``: Δ with its 95 % t-interval,
-p-values, share of seeds above and tied), with ``full`` for scale. The release timing is measured on the
+The table pairs ``dropout`` with ``never`` seed by seed (``taskalloc.evaluation.stats.paired``: Δ with its 95 %
+t-interval, p-values, share of seeds above and tied), with ``full`` for scale. The release timing is measured on the
 ``dropout`` run: the rounds from the failure until no live agent's table holds a bid of k, against the bound
-``silence_timeout + D`` (D the diameter of the live network); the share of k's tasks at the failure that end up
-valid with other agents is the re-assignment.
+``silence_timeout + D`` (D the diameter of the live network); the share of k's tasks at the failure that end up valid
+with other agents is the re-assignment.
 """
 
 from __future__ import annotations
@@ -28,11 +28,11 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.episodes import default_jobs
-from evaluation.pool import parallel_map
-from evaluation.report import markdown_table
-from evaluation.stats import format_mean_sd, format_p, paired
-from policies import make_policy, rollout
+from taskalloc.evaluation.episodes import default_jobs
+from taskalloc.evaluation.pool import parallel_map
+from taskalloc.evaluation.report import markdown_table
+from taskalloc.evaluation.stats import format_mean_sd, format_p, paired
+from taskalloc.policies import make_policy, rollout
 from taskalloc_env import Scenario, TaskAllocConfig, TaskAllocEnv, resolve_config
 from taskalloc_env.config import GENERATION_FIELDS, to_mapping
 from taskalloc_env.errors import run_cli
@@ -156,7 +156,7 @@ def tables(rows: Sequence[dict[str, Any]]) -> tuple[str, str]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.dropout", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="taskalloc dropout", description=__doc__.split("\n\n")[0])
     parser.add_argument("--episodes", type=int, default=100, help="paired seeds per algorithm (default 100)")
     parser.add_argument("--round", type=int, default=3, help="the round at whose start agent k fails (default 3)")
     parser.add_argument("--scenario", default="default", help="scenario name or YAML file (default: default)")

@@ -1,13 +1,13 @@
 """Paired evaluation: several solvers on the same seeds, one row of figures per episode, parallel over processes.
 
 A *solver* is a policy name (``random``, ``cbba``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi``,
-``learned:<checkpoint>``, see ``policies.make_policy``), a centralised solver (``sgama``, ``exact``, ``lns``: the
-group search of ``policies.local_search``), or ``cbba-duo`` (preferred-duo CBBA, ``policies.duo``: every task of the
-single-agent instance split into a lead and a helper part, messages and rounds counted as for any policy). Seed s
-generates the same scenario instance for every solver (the paired design of thesis §5.3.1): the environment
-draws the instance from ``reset(seed=s)`` before any policy acts, and each row carries a fingerprint of the instance
-so that the pairing can be checked. Policies that need protocol options (``env_overrides``, e.g. task quitting)
-get an environment built with them; those options do not touch the instance generator.
+``learned:<checkpoint>``, see ``taskalloc.policies.make_policy``), a centralised solver (``sgama``, ``exact``, ``lns``:
+the group search of ``taskalloc.policies.local_search``), or ``cbba-duo`` (preferred-duo CBBA,
+``taskalloc.policies.duo``: every task of the single-agent instance split into a lead and a helper part, messages and
+rounds counted as for any policy). Seed s generates the same scenario instance for every solver (the paired design of
+thesis §5.3.1): the environment draws the instance from ``reset(seed=s)`` before any policy acts, and each row carries a
+fingerprint of the instance so that the pairing can be checked. Policies that need protocol options (``env_overrides``,
+e.g. task quitting) get an environment built with them; those options do not touch the instance generator.
 
 Communication steps (thesis §3.3.2: one message from i received by k is one step): ``messages`` counts every
 message received (one per sender → receiver pair per round); ``comm_steps`` = messages / N_n, the per-agent count
@@ -31,15 +31,15 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from evaluation.distributed import BACKENDS, ray_map
-from evaluation.pool import parallel_map
-from policies import exact, local_search, make_policy, rollout, sgama
-from policies.base import Policy
-from policies.centralised import MAX_AGENTS, MAX_TASKS
-from policies.duo import preferred_duo_cbba
-from policies.fast import solvable as fast_solvable
-from policies.fast import solve as fast_solve
-from policies.scripted import CBGAPolicy
+from taskalloc.evaluation.distributed import BACKENDS, ray_map
+from taskalloc.evaluation.pool import parallel_map
+from taskalloc.policies import exact, local_search, make_policy, rollout, sgama
+from taskalloc.policies.base import Policy
+from taskalloc.policies.centralised import MAX_AGENTS, MAX_TASKS
+from taskalloc.policies.duo import preferred_duo_cbba
+from taskalloc.policies.fast import solvable as fast_solvable
+from taskalloc.policies.fast import solve as fast_solve
+from taskalloc.policies.scripted import CBGAPolicy
 from taskalloc_env import Scenario, TaskAllocConfig, TaskAllocEnv
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import max_required_agents
@@ -204,7 +204,7 @@ def default_jobs() -> int:
 def run_episodes(episodes: Sequence[Episode], jobs: int = 1, progress: bool = True,
                  desc: str = "episodes", backend: str = "local") -> list[dict[str, Any]]:
     """Run every episode (in ``jobs`` processes when > 1, or as Ray tasks with ``backend="ray"``, see
-    ``evaluation.distributed``); rows come back in the order of ``episodes``."""
+    ``taskalloc.evaluation.distributed``); rows come back in the order of ``episodes``."""
     if backend not in BACKENDS:
         raise ValueError(f"backend {backend!r} is not one of {BACKENDS}")
     rows = []

@@ -1,10 +1,10 @@
 """Experiment runner: the thesis's experiments (§3.3, §5.3) as YAML files, run on paired seeds, with reports.
 
-    python -m evaluation.experiments run configs/experiments/fig5_16_l4.yaml [--episodes N] [--jobs N] [--quick]
-    python -m evaluation.experiments run --all --overwrite   # every configs/experiments/*.yaml, rewrites results/
+    taskalloc experiments run configs/experiments/fig5_16_l4.yaml [--episodes N] [--jobs N] [--quick]
+    taskalloc experiments run --all --overwrite   # every configs/experiments/*.yaml, rewrites results/
                                                              # and docs/results.md
-    python -m evaluation.experiments report --all         # tables, plots and docs again from the saved CSVs
-    python -m evaluation.experiments list
+    taskalloc experiments report --all         # tables, plots and docs again from the saved CSVs
+    taskalloc experiments list
 
 Each experiment runs every series on the same seeds 0..N−1 at every sweep point (the paired design of thesis
 §5.3.1) and writes to ``<out>/<name>/``: ``episodes.csv`` (one row per episode, non-converged ones included and
@@ -56,9 +56,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from evaluation.distributed import BACKENDS
-from evaluation.episodes import Episode, check_pairing, default_jobs, run_episodes, skip_reason, solver_name
-from evaluation.report import (
+from taskalloc.evaluation.distributed import BACKENDS
+from taskalloc.evaluation.episodes import Episode, check_pairing, default_jobs, run_episodes, skip_reason, solver_name
+from taskalloc.evaluation.report import (
     METRIC_DIGITS,
     METRIC_LABELS,
     PAIRED_HEADER,
@@ -77,7 +77,7 @@ from evaluation.report import (
     values,
     write_csv,
 )
-from evaluation.stats import PairedComparison, format_p
+from taskalloc.evaluation.stats import PairedComparison, format_p
 from taskalloc_env import TaskAllocConfig, resolve_config, resources
 from taskalloc_env.config import read_yaml, to_mapping
 from taskalloc_env.errors import ConfigError, run_cli
@@ -410,7 +410,7 @@ def run_experiment(exp: Experiment, out: Path, jobs: int, episodes: int | None =
             "backend": backend,
             "quick": quick, "wall_seconds": round(wall, 1), "cpu_seconds": round(cpu, 1),
             "episodes_total": len(rows),
-            "command": " ".join(["python -m evaluation.experiments", *sys.argv[1:]]) if sys.argv else "",
+            "command": " ".join(["taskalloc experiments", *sys.argv[1:]]) if sys.argv else "",
             "skipped": skipped, **environment_info()}
     (target / "run.json").write_text(json.dumps(info, indent=2) + "\n")
     write_reports(exp, rows, target, points, docs=docs)
@@ -714,7 +714,7 @@ def _docs_block(exp: Experiment, cells: Mapping, points: Sequence[Point], headli
     setting = ", ".join(f"{k} = {_label(v)}" for k, v in exp.overrides.items())
     parts = [f"*Source: {exp.source}. Scenario `{exp.scenario}`{', ' + setting if setting else ''}; "
              f"{seeds_run} paired seeds per cell (seeds 0–{seeds_run - 1}). Regenerate: "
-             f"`python -m evaluation.experiments run configs/experiments/{exp.name}.yaml --overwrite`. "
+             f"`taskalloc experiments run configs/experiments/{exp.name}.yaml --overwrite`. "
              f"Full tables: [{rel}/table.md]({rel}/table.md), per-episode data: `{rel}/episodes.csv`.*\n"]
     if exp.published:
         parts.append(f"**Published:** {exp.published}\n")
@@ -780,12 +780,12 @@ def experiment_paths(paths: Sequence[str], every: bool) -> list[str]:
     if every:
         return resources.names("experiments")
     if not paths:
-        raise ConfigError("name experiments (python -m evaluation.experiments list) or files, or pass --all")
+        raise ConfigError("name experiments (taskalloc experiments list) or files, or pass --all")
     return list(paths)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.experiments", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="taskalloc experiments", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run experiments and write their results")
     report = sub.add_parser("report", help="rewrite tables, plots and docs from saved episodes.csv files")

@@ -1,7 +1,7 @@
 """Figures of single instances: agents, communication ranges, links and the assignment (thesis §4.3, Figs 4.2–4.5).
 
-    python -m evaluation.figures links --overwrite           # results/fig4_2_5_links/*.png, seed picked as below
-    python -m evaluation.figures links --seed 7 --out /tmp/links
+    taskalloc figures links --overwrite           # results/fig4_2_5_links/*.png, seed picked as below
+    taskalloc figures links --seed 7 --out /tmp/links
 
 The thesis shows one instance at a few communication ranges: 10 agents and 20 single-agent tasks (CBBA) at r = 1,
 2 and 2.5 (Figs 4.2–4.4), and 10 agents with 10 tasks of L_j = 2 (CBGA) at r = 1 (Fig 4.5); left the agents with
@@ -26,9 +26,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from evaluation.episodes import solve
-from evaluation.report import refuse_existing
-from policies import make_policy
+from taskalloc.evaluation.episodes import solve
+from taskalloc.evaluation.report import refuse_existing
+from taskalloc.policies import make_policy
 from taskalloc_env import TaskAllocEnv, resolve_config
 from taskalloc_env.errors import run_cli
 from taskalloc_env.network import CommGraph
@@ -127,7 +127,7 @@ def links(out: Path, seed: int | None = None, panels: Sequence[tuple] = PANELS) 
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.figures", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="taskalloc figures", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     cmd = sub.add_parser("links", help="agents, ranges, links and assignments of one instance (Figs 4.2–4.5)")
     cmd.add_argument("--seed", type=int, default=None, help="instance seed (default: the first that fits, above)")

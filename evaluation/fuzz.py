@@ -1,7 +1,7 @@
 """Fuzzing: random scenarios across every option, every policy, and the invariants that must hold on each episode.
 
-    python -m evaluation.fuzz                      # 300 episodes (seconds), seed 0
-    python -m evaluation.fuzz --episodes 20000 --seed 7 --jobs 2
+    taskalloc fuzz                      # 300 episodes (seconds), seed 0
+    taskalloc fuzz --episodes 20000 --seed 7 --jobs 2
 
 Each episode draws a config (sizes, L_j, equipment mixes, prerequisite chains, communication range, every named
 scoring and protocol option, message loss, bursts, delays and failing agents, pop-up tasks, the asynchronous
@@ -39,9 +39,9 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.episodes import default_jobs
-from evaluation.pool import parallel_map
-from policies import make_policy
+from taskalloc.evaluation.episodes import default_jobs
+from taskalloc.evaluation.pool import parallel_map
+from taskalloc.policies import make_policy
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.errors import run_cli
 
@@ -253,7 +253,7 @@ def fuzz(episodes: int, seed: int, jobs: int = 1) -> tuple[Counter, list[dict[st
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.fuzz", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="taskalloc fuzz", description=__doc__.split("\n\n")[0])
     parser.add_argument("--episodes", type=int, default=300, help="random episodes to run (default 300)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the draw of configs, policies and seeds")
     parser.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes (default: every core)")

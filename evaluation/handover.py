@@ -1,19 +1,19 @@
 """Where a policy loses to the optimum, round by round: the oracle hands over to the policy, or the reverse.
 
-    python -m evaluation.handover --policy learned:mappo_small_pooling_1m --policy cbgabi --rounds 1 2 3
+    taskalloc handover --policy learned:mappo_small_pooling_1m --policy cbgabi --rounds 1 2 3
 
 For each policy P and each K in ``--rounds`` it plays the same held-out instances three ways: P alone; the
-privileged ``oracle`` (``policies.oracle``: every agent bids along the exact optimum's path) for the first K
+privileged ``oracle`` (``taskalloc.policies.oracle``: every agent bids along the exact optimum's path) for the first K
 rounds, then P; P for the first K rounds, then the oracle. The hand-over to P shows how close P comes to the
 optimum after an optimal start (what P's later rounds lose), the hand-over from P how far an optimal continuation
 gets from P's start (what P's first rounds commit it to; the oracle never quits, so it cannot undo a bid). A round
 is the protocol's round (``info["round"]``): under the synchronous protocols every agent's bids up to its pass,
 then the consensus (thesis Alg 5); round 0 is played before any message is exchanged. Under ``acbba`` it is a tick.
-Scores are divided by the exact optimum's mean (``policies.centralised.exact``), so the scenario must be small
+Scores are divided by the exact optimum's mean (``taskalloc.policies.centralised.exact``), so the scenario must be small
 enough for it (``train_small``); with ``--reference lns`` the oracle bids along the group search's allocation
-(``policies.local_search``, a lower bound on the optimum) and scores are divided by its mean, at any size:
+(``taskalloc.policies.local_search``, a lower bound on the optimum) and scores are divided by its mean, at any size:
 
-    python -m evaluation.handover --scenario default --reference lns --policy cbgabi --rounds 1 2 --episodes 50
+    taskalloc handover --scenario default --reference lns --policy cbgabi --rounds 1 2 --episodes 50
 
 docs/learning.md ("What stands between …") quotes these tables.
 """
@@ -25,10 +25,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from evaluation.episodes import evaluate, skip_reason, solve
-from evaluation.seeds import add_heldout_arguments, heldout_seeds
-from policies import OraclePolicy, Policy, make_policy
-from policies.handover import Handover
+from taskalloc.evaluation.episodes import evaluate, skip_reason, solve
+from taskalloc.evaluation.seeds import add_heldout_arguments, heldout_seeds
+from taskalloc.policies import OraclePolicy, Policy, make_policy
+from taskalloc.policies.handover import Handover
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import resolve_config
 from taskalloc_env.env import TaskAllocEnv
@@ -112,7 +112,7 @@ def checked_table_arguments(args: argparse.Namespace) -> tuple[list[int], list[s
 
 
 def main(argv: Sequence[str] | None = None) -> str:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.handover", description=__doc__,
+    parser = argparse.ArgumentParser(prog="taskalloc handover", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--rounds", type=int, nargs="+", default=[1, 2, 3], help="hand-over rounds (default 1 2 3)")
     add_table_arguments(parser)

@@ -1,16 +1,16 @@
 """A quick table: baselines, centralised solvers and any learned checkpoints on held-out seeds.
 
-    python -m evaluation.heldout                                   # the committed models, seeds 10000..10199
-    python -m evaluation.heldout --scenario default --episodes 20 --learned "mine=runs/x/model.json"
+    taskalloc heldout                                   # the committed models, seeds 10000..10199
+    taskalloc heldout --scenario default --episodes 20 --learned "mine=runs/x/model.json"
 
-Rows: random, CBGA, CBGABI (scripted, decentralised), SGAMA (centralised greedy), LNS (``policies.local_search``,
-a lower bound on the optimum), the exact optimum where it is tractable, and every
-``--learned LABEL=PATH`` checkpoint (default: the committed models ``models/train_small_bc/bc.json``,
-``train_small``, ``train_small_bc``, ``mappo_small``, ``mappo_small_pooling`` and ``mappo_mixture``). The tables
-of ``docs/learning.md``, with several training seeds per configuration, come from ``evaluation.learning_report``.
-Each policy runs in an environment built with its ``env_overrides``; seed s is the same instance for
-every row (the instance is drawn at ``reset(seed=s)`` before any policy acts). Learned policies act greedily: the
-most likely kind of action (pass, bid or quit), then its most likely action (``policies.learned.greedy_actions``).
+Rows: random, CBGA, CBGABI (scripted, decentralised), SGAMA (centralised greedy), LNS
+(``taskalloc.policies.local_search``, a lower bound on the optimum), the exact optimum where it is tractable, and every
+``--learned LABEL=PATH`` checkpoint (default: the committed models ``models/train_small_bc/bc.json``, ``train_small``,
+``train_small_bc``, ``mappo_small``, ``mappo_small_pooling`` and ``mappo_mixture``). The tables of ``docs/learning.md``,
+with several training seeds per configuration, come from ``taskalloc.evaluation.learning_report``. Each policy runs in
+an environment built with its ``env_overrides``; seed s is the same instance for every row (the instance is drawn at
+``reset(seed=s)`` before any policy acts). Learned policies act greedily: the most likely kind of action (pass, bid or
+quit), then its most likely action (``taskalloc.policies.learned.greedy_actions``).
 """
 
 from __future__ import annotations
@@ -24,9 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.episodes import Episode, run_episode, skip_reason
-from evaluation.seeds import add_heldout_arguments, heldout_seeds
-from evaluation.stats import format_mean_sd, format_p, paired
+from taskalloc.evaluation.episodes import Episode, run_episode, skip_reason
+from taskalloc.evaluation.seeds import add_heldout_arguments, heldout_seeds
+from taskalloc.evaluation.stats import format_mean_sd, format_p, paired
 from taskalloc_env import resources
 from taskalloc_env.config import resolve_config
 from taskalloc_env.errors import run_cli
@@ -47,7 +47,8 @@ CENTRALISED = (("SGAMA (centralised greedy)", "sgama"), ("LNS (centralised group
 def run_rows(scenario: str, seeds: Sequence[int], learned: Sequence[tuple[str, str]]) -> list[dict[str, Any]]:
     """One record per row: label, per-seed scores and mean figures, and the seconds it took.
 
-    Each episode goes through ``evaluation.episodes.run_episode``, the experiment runner's paired evaluation."""
+    Each episode goes through ``taskalloc.evaluation.episodes.run_episode``, the experiment runner's paired
+    evaluation."""
     cfg = resolve_config(scenario)
     solvers = [(label, name, "policy") for label, name in SCRIPTED]
     solvers += [(label, name, "solver") for label, name in CENTRALISED]
@@ -93,7 +94,7 @@ def markdown(rows: Sequence[dict[str, Any]], seeds: Sequence[int]) -> str:
 
 
 def main(argv: list[str] | None = None) -> str:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.heldout", description=__doc__,
+    parser = argparse.ArgumentParser(prog="taskalloc heldout", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenario", default="train_small", help="scenario name or YAML path (default train_small)")
     add_heldout_arguments(parser)

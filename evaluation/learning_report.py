@@ -1,24 +1,24 @@
 """The tables and curves of ``docs/learning.md``: learned configurations, several training seeds each, against the
 baselines on held-out instances.
 
-    python -m evaluation.learning_report evaluate                  # every setting; writes results/learning/
-    python -m evaluation.learning_report evaluate --only train_small --episodes 200 --jobs 2 [--backend ray]
-    python -m evaluation.learning_report render                    # rewrites the generated blocks of the doc
+    taskalloc learning-report evaluate                  # every setting; writes results/learning/
+    taskalloc learning-report evaluate --only train_small --episodes 200 --jobs 2 [--backend ray]
+    taskalloc learning-report render                    # rewrites the generated blocks of the doc
 
-``evaluate`` plays every row of a setting on the held-out seeds 10000 … (``evaluation.seeds.TEST_SEEDS``), through
-the experiment runner's ``run_episodes`` (seed s is the same instance for every row; ``--backend ray`` fans out over
-Ray), and writes per-seed figures to ``results/learning/heldout_<setting>.json``. Rows: the baselines (random,
-CBGA, CBGABI, SGAMA, LNS (``policies.local_search``, a lower bound on the optimum at every size), the exact
-optimum where it is tractable, the oracle that bids along the optimum through the
-protocol, ``policies.oracle``, behaviour cloning of CBGABI) and, per learned
-configuration, one row per training seed, read from ``<runs>/<config>/seed<k>`` (the training commands'
-``--out-dir``; ``models/<name>`` for seeds that are committed models). It also copies each run's ``eval.csv`` and
-``summary.yaml`` to ``results/learning/runs/``, so that ``render`` needs nothing outside the repository. Rows
-already in the results file are kept while their weights are unchanged, and so is the row of a training seed whose
-model is no longer on disk. ``loss_small`` plays the ``train_small`` instances under 20 % message loss, with the same
-loss draws for every row, and ``delay_small`` with every message delayed by 0–2 extra rounds, with the same delay
-draws (``delay_default``: the default scenario under that delay); their centralised rows (SGAMA, LNS, the
-exact optimum) are copied from the perfect-link set of the same instances.
+``evaluate`` plays every row of a setting on the held-out seeds 10000 … (``taskalloc.evaluation.seeds.TEST_SEEDS``),
+through the experiment runner's ``run_episodes`` (seed s is the same instance for every row; ``--backend ray`` fans out
+over Ray), and writes per-seed figures to ``results/learning/heldout_<setting>.json``. Rows: the baselines (random,
+CBGA, CBGABI, SGAMA, LNS (``taskalloc.policies.local_search``, a lower bound on the optimum at every size), the exact
+optimum where it is tractable, the oracle that bids along the optimum through the protocol,
+``taskalloc.policies.oracle``, behaviour cloning of CBGABI) and, per learned configuration, one row per training seed,
+read from ``<runs>/<config>/seed<k>`` (the training commands' ``--out-dir``; ``models/<name>`` for seeds that are
+committed models). It also copies each run's ``eval.csv`` and ``summary.yaml`` to ``results/learning/runs/``, so that
+``render`` needs nothing outside the repository. Rows already in the results file are kept while their weights are
+unchanged, and so is the row of a training seed whose model is no longer on disk. ``loss_small`` plays the
+``train_small`` instances under 20 % message loss, with the same loss draws for every row, and ``delay_small`` with
+every message delayed by 0–2 extra rounds, with the same delay draws (``delay_default``: the default scenario under that
+delay); their centralised rows (SGAMA, LNS, the exact optimum) are copied from the perfect-link set of the same
+instances.
 
 ``render`` computes, per learned configuration, the mean over its seeds of each seed's mean score with a 95 %
 t-interval across seeds (Student t, k − 1 degrees of freedom), and per seed the paired comparison with CBGABI
@@ -49,10 +49,10 @@ import numpy as np
 import yaml
 from scipy import stats
 
-from evaluation.distributed import BACKENDS
-from evaluation.episodes import CENTRALISED, Episode, default_jobs, run_episodes, skip_reason
-from evaluation.report import markdown_table
-from evaluation.stats import format_p, paired
+from taskalloc.evaluation.distributed import BACKENDS
+from taskalloc.evaluation.episodes import CENTRALISED, Episode, default_jobs, run_episodes, skip_reason
+from taskalloc.evaluation.report import markdown_table
+from taskalloc.evaluation.stats import format_p, paired
 from taskalloc_env import resolve_config, resources
 from taskalloc_env.errors import ConfigError, run_cli
 
@@ -195,7 +195,7 @@ def rows_to_run(setting: Setting, runs: Path,
 def evaluate(setting: Setting, episodes: int, jobs: int, backend: str, runs: Path, out: Path,
              recompute: bool) -> Path:
     """Play every row of ``setting`` on the held-out seeds; rows already in the JSON (same weights) are kept."""
-    from evaluation.seeds import TEST_SEEDS
+    from taskalloc.evaluation.seeds import TEST_SEEDS
 
     seeds = list(range(TEST_SEEDS.start, TEST_SEEDS.start + episodes))
     path = out / f"heldout_{setting.name}.json"
@@ -448,7 +448,7 @@ def render(out: Path, doc: Path, curves: Path) -> None:
 
 # -- command line ------------------------------------------------------------------------------------------------
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.learning_report", description=__doc__,
+    parser = argparse.ArgumentParser(prog="taskalloc learning-report", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
     ev = sub.add_parser("evaluate", help="play every row on the held-out seeds, write results/learning/*.json")

@@ -1,15 +1,15 @@
 """How close a round 0 played from one agent's own knowledge comes to the optimum: the local plan, handed over.
 
-    python -m evaluation.local_plan --policy learned:mappo_small_pooling_1m --policy cbgabi --episodes 200
+    taskalloc local-plan --policy learned:mappo_small_pooling_1m --policy cbgabi --episodes 200
 
-For each policy P it plays the held-out instances twice: P alone, and ``policies.local_plan`` for round 0 (each
-agent bids on the tasks that the exact optima of teams drawn around its own start give it in at least half of the
+For each policy P it plays the held-out instances twice: P alone, and ``taskalloc.policies.local_plan`` for round 0
+(each agent bids on the tasks that the exact optima of teams drawn around its own start give it in at least half of the
 draws), then P. Scores are divided by the exact optimum's mean; read them next to the oracle's hand-over of
-``evaluation.handover`` (the optimum's own round 0, then P): the two bracket what a round 0 played without hearing
-anyone can give. With ``--reference lns`` the drawn teams are solved by the group search (``policies.local_search``)
-and scores are divided by its mean, at any size:
+``taskalloc.evaluation.handover`` (the optimum's own round 0, then P): the two bracket what a round 0 played without
+hearing anyone can give. With ``--reference lns`` the drawn teams are solved by the group search
+(``taskalloc.policies.local_search``) and scores are divided by its mean, at any size:
 
-    python -m evaluation.local_plan --scenario default --reference lns --episodes 40
+    taskalloc local-plan --scenario default --reference lns --episodes 40
 
 The local plan costs N × ``--samples`` solves per instance (about 5 s on ``train_small`` with 24 draws, about half
 a minute on the default scenario with LNS); it is computed once per instance and reused by every policy's row.
@@ -21,21 +21,21 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from evaluation.handover import (
+from taskalloc.evaluation.handover import (
     add_table_arguments,
     checked_table_arguments,
     markdown,
     played,
     reference_allocations,
 )
-from policies import make_policy
-from policies.handover import Handover
-from policies.local_plan import LocalPlanPolicy
+from taskalloc.policies import make_policy
+from taskalloc.policies.handover import Handover
+from taskalloc.policies.local_plan import LocalPlanPolicy
 from taskalloc_env.errors import ConfigError, run_cli
 
 
 def main(argv: Sequence[str] | None = None) -> str:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.local_plan", description=__doc__,
+    parser = argparse.ArgumentParser(prog="taskalloc local-plan", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--samples", type=int, default=24, help="teams drawn per agent (default 24)")
     add_table_arguments(parser)

@@ -1,20 +1,20 @@
 """How much of the local plan a learned round-0 planner has learned: both scored against the real paths (ours).
 
-    python -m evaluation.plan_fit --planner learned:runs/planner_small/seed0 --episodes 40
+    taskalloc plan-fit --planner learned:runs/planner_small/seed0 --episodes 40
 
 At each agent's first round-0 state (no bid made, no message heard; thesis Alg 5) two estimates of the same thing
 are compared: for every task the agent may bid on, the probability that the task is on the agent's path in the
-solver's allocation of the instance. The local plan (``policies.local_plan``) estimates it by drawing ``--samples``
-teams around the agent's own start and solving each; a round-0 planner (``policies.round_zero``, trained by
-``training.planner`` on exactly this target) from the agent's observation. Both are scored against the paths of
-the real instance, as is the base rate (the share of allowed tasks on a path, one number for every task): binary
-cross-entropy (the loss ``training.planner`` minimises; estimates clipped to [0.001, 0.999]) and, for the tasks
-estimated at ½ or more (those both bid on), how many, precision and recall. The local plan's cross-entropy shows
-what the agent's own information allows; the planner's distance from it is what its training has not learned.
-The seeds default to the validation instances, on which ``training.planner`` reports its validation loss over
+solver's allocation of the instance. The local plan (``taskalloc.policies.local_plan``) estimates it by drawing
+``--samples`` teams around the agent's own start and solving each; a round-0 planner (``taskalloc.policies.round_zero``,
+trained by ``taskalloc.training.planner`` on exactly this target) from the agent's observation. Both are scored against
+the paths of the real instance, as is the base rate (the share of allowed tasks on a path, one number for every task):
+binary cross-entropy (the loss ``taskalloc.training.planner`` minimises; estimates clipped to [0.001, 0.999]) and, for
+the tasks estimated at ½ or more (those both bid on), how many, precision and recall. The local plan's cross-entropy
+shows what the agent's own information allows; the planner's distance from it is what its training has not learned. The
+seeds default to the validation instances, on which ``taskalloc.training.planner`` reports its validation loss over
 every round-0 state (this table keeps the first one of each agent, the state the plan is made in). Costs as
-``evaluation.local_plan``: N × ``--samples`` solves per instance. docs/learning.md ("The local plan learned") names
-this command.
+``taskalloc.evaluation.local_plan``: N × ``--samples`` solves per instance. docs/learning.md ("The local plan learned")
+names this command.
 """
 
 from __future__ import annotations
@@ -25,14 +25,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from evaluation.episodes import skip_reason
-from evaluation.handover import REFERENCES
-from evaluation.pool import parallel_map
-from evaluation.seeds import VALIDATION_SEED_START
-from policies.base import stack_observations
-from policies.local_plan import SOLVERS, LocalPlanPolicy
-from policies.registry import planner_pair
-from policies.round_zero import RoundZeroPlanner
+from taskalloc.evaluation.episodes import skip_reason
+from taskalloc.evaluation.handover import REFERENCES
+from taskalloc.evaluation.pool import parallel_map
+from taskalloc.evaluation.seeds import VALIDATION_SEED_START
+from taskalloc.policies.base import stack_observations
+from taskalloc.policies.local_plan import SOLVERS, LocalPlanPolicy
+from taskalloc.policies.registry import planner_pair
+from taskalloc.policies.round_zero import RoundZeroPlanner
 from taskalloc_env.allocation import on_paths
 from taskalloc_env.config import resolve_config
 from taskalloc_env.env import TaskAllocEnv
@@ -108,7 +108,7 @@ def table(states: FirstStates) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> str:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.plan_fit", description=__doc__,
+    parser = argparse.ArgumentParser(prog="taskalloc plan-fit", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--planner", action="append", required=True, metavar="NAME",
                         help="a round-0 planner's policy name, learned:<checkpoint> (repeatable)")

@@ -1,14 +1,14 @@
 """How a learned round-0 planner's play rule moves its score: its threshold, and replanning or planning once (ours).
 
-    python -m evaluation.planner_play --planner learned:runs/planner_small_attention/seed0 --thresholds 0.3 0.5 0.7
+    taskalloc planner-play --planner learned:runs/planner_small_attention/seed0 --thresholds 0.3 0.5 0.7
 
-``policies.round_zero.RoundZeroPlanner`` bids in round 0 on the allowed tasks whose estimated probability of being
-on the agent's path is at least a threshold, then hands over to the policy its checkpoint names. It either
+``taskalloc.policies.round_zero.RoundZeroPlanner`` bids in round 0 on the allowed tasks whose estimated probability of
+being on the agent's path is at least a threshold, then hands over to the policy its checkpoint names. It either
 estimates afresh at every step (``replan``, the default) or plans once at the agent's first round-0 state, the local
-plan's way. This table plays the same weights with every threshold given and both rules, next to the follower
-alone, on the same instances (seed s is the same instance for every row): mean score, its share of the follower's,
-and the paired t-test against the follower. The seeds default to validation instances (``evaluation.seeds``), as
-the rule is chosen there and not on the held-out ones.
+plan's way. This table plays the same weights with every threshold given and both rules, next to the follower alone, on
+the same instances (seed s is the same instance for every row): mean score, its share of the follower's, and the paired
+t-test against the follower. The seeds default to validation instances (``taskalloc.evaluation.seeds``), as the rule is
+chosen there and not on the held-out ones.
 """
 
 from __future__ import annotations
@@ -18,18 +18,18 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from evaluation.episodes import evaluate
-from evaluation.seeds import VALIDATION_SEED_START
-from evaluation.stats import format_p, paired
-from policies.handover import Handover
-from policies.registry import planner_pair
-from policies.round_zero import is_threshold
+from taskalloc.evaluation.episodes import evaluate
+from taskalloc.evaluation.seeds import VALIDATION_SEED_START
+from taskalloc.evaluation.stats import format_p, paired
+from taskalloc.policies.handover import Handover
+from taskalloc.policies.registry import planner_pair
+from taskalloc.policies.round_zero import is_threshold
 from taskalloc_env.config import resolve_config
 from taskalloc_env.errors import ConfigError, run_cli
 
 
 def main(argv: Sequence[str] | None = None) -> str:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.planner_play", description=__doc__,
+    parser = argparse.ArgumentParser(prog="taskalloc planner-play", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--planner", required=True, metavar="NAME",
                         help="a round-0 planner's policy name, learned:<checkpoint>")

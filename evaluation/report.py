@@ -1,7 +1,8 @@
 """Result rows → arrays, markdown tables, CSV files and PNG plots (shared by the compare command and the runner).
 
-A *row* is one episode (``evaluation.episodes.run_episode``). Rows of one cell (same point, same series) are
-sorted by seed, so cells of different series line up seed by seed for the paired statistics (``evaluation.stats``).
+A *row* is one episode (``taskalloc.evaluation.episodes.run_episode``). Rows of one cell (same point, same series) are
+sorted by seed, so cells of different series line up seed by seed for the paired statistics
+(``taskalloc.evaluation.stats``).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from evaluation.stats import PairedComparison, ci95_half, format_mean_sd, format_p, paired
+from taskalloc.evaluation.stats import PairedComparison, ci95_half, format_mean_sd, format_p, paired
 from taskalloc_env.errors import ConfigError
 
 METRIC_LABELS = {

@@ -1,11 +1,11 @@
 """Robustness under message loss: random scenarios, each algorithm under independent loss, checked episode by episode.
 
-    python -m evaluation.robustness                                  # 1,000 scenarios per algorithm, loss 20 %
-    python -m evaluation.robustness --scenarios 50 --loss 0.3 --jobs 2
+    taskalloc robustness                                  # 1,000 scenarios per algorithm, loss 20 %
+    taskalloc robustness --scenarios 50 --loss 0.3 --jobs 2
 
 For each algorithm (CBBA on single-agent tasks; CBGA and CBGABI on mixed L_j) the command draws random scenarios
 (3–10 agents, 4–20 tasks, start-time spreads, windows and durations, the L_j mixes and equipment mixes of
-``evaluation.fuzz``, a limited communication range in 30 % of them), runs the algorithm with each message lost
+``taskalloc.evaluation.fuzz``, a limited communication range in 30 % of them), runs the algorithm with each message lost
 independently with probability ``--loss``, and checks every episode:
 
 * ``converged``: the episode ended by the convergence test (docs/algorithm.md §4.5), not by the round bound
@@ -33,11 +33,11 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.episodes import default_jobs
-from evaluation.fuzz import draw_equipment
-from evaluation.pool import parallel_map
-from evaluation.report import markdown_table
-from policies import make_policy, rollout
+from taskalloc.evaluation.episodes import default_jobs
+from taskalloc.evaluation.fuzz import draw_equipment
+from taskalloc.evaluation.pool import parallel_map
+from taskalloc.evaluation.report import markdown_table
+from taskalloc.policies import make_policy, rollout
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.allocation import on_paths
 from taskalloc_env.errors import run_cli
@@ -47,7 +47,8 @@ MIXES = ([1, 2], [1, 2, 3], [2, 3], [1, 3], [1, 2, 3, 4])
 
 
 def draw_config(rng: np.random.Generator, single: bool, loss: float) -> dict[str, Any]:
-    """A random scenario: sizes, windows and L_j as ``evaluation.fuzz`` draws them (mixed L_j unless ``single``)."""
+    """A random scenario: sizes, windows and L_j as ``taskalloc.evaluation.fuzz`` draws them (mixed L_j unless
+    ``single``)."""
     n_agents, n_tasks = int(rng.integers(3, 11)), int(rng.integers(4, 21))
     kw: dict[str, Any] = {"n_agents": n_agents, "n_tasks": n_tasks, "message_loss": loss,
                           "start_time_range": [0.0, float(rng.choice([10.0, 30.0, 60.0, 100.0]))],
@@ -186,7 +187,7 @@ def report(verdicts: Sequence[dict[str, Any]]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m evaluation.robustness", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="taskalloc robustness", description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenarios", type=int, default=1000, help="random scenarios per algorithm (default 1000)")
     parser.add_argument("--loss", type=float, default=0.2, help="independent message-loss rate (default 0.2)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the draw of scenarios (default 0)")

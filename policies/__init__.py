@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from policies.base import Policy
-from policies.centralised import exact, sgama
-from policies.local_search import local_search
-from policies.oracle import OraclePolicy
-from policies.registry import POLICY_NAMES, make_policy
-from policies.rollout import rollout
-from policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
+from taskalloc.policies.base import Policy
+from taskalloc.policies.centralised import exact, sgama
+from taskalloc.policies.local_search import local_search
+from taskalloc.policies.oracle import OraclePolicy
+from taskalloc.policies.registry import POLICY_NAMES, make_policy
+from taskalloc.policies.rollout import rollout
+from taskalloc.policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
 
 __all__ = [
     "POLICY_NAMES",

@@ -2,7 +2,8 @@
 
 A checkpoint is two files with one stem, ``<stem>.json`` and ``<stem>.safetensors`` (``models/train_small/model``):
 
-* the JSON names the actor class (one of ``policies.networks.NETWORKS``) and its integer sizes, the observation
+* the JSON names the actor class (one of ``taskalloc.policies.networks.NETWORKS``) and its integer sizes, the
+observation
   features it was trained on (checked against the environment's layout before acting), the protocol options the
   policy needs from the environment (``env_overrides``) and free-form metadata (plain JSON values only);
 * the safetensors file holds the actor's weights, tensors only.
@@ -13,7 +14,7 @@ crafted zip runs code. ``load`` refuses zips unless ``allow_pickle=True`` (with 
 turns a zip trained by this project into a checkpoint while reading only its JSON entries and its weights, which
 torch reads with ``weights_only=True``.
 
-    python -m policies.checkpoint convert runs/old/model.zip models/mine/model
+    taskalloc checkpoint convert runs/old/model.zip models/mine/model
 """
 
 from __future__ import annotations
@@ -60,7 +61,7 @@ def save(stem: str | Path, actor: Any, own_features: Sequence[str], task_feature
     """Write ``<stem>.json`` and ``<stem>.safetensors``; returns the JSON path."""
     from safetensors.torch import save_file
 
-    from policies.networks import NETWORKS
+    from taskalloc.policies.networks import NETWORKS
 
     if type(actor) not in NETWORKS.values():
         raise CheckpointError(f"{type(actor).__name__} is not a known network class ({sorted(NETWORKS)})")
@@ -139,7 +140,7 @@ def _read_weights(source: Path | Traversable) -> dict[str, Any]:
 
 
 def _build(spec: Mapping[str, Any], weights: Mapping[str, Any], where: str) -> Checkpoint:
-    from policies.networks import NETWORKS, count_parameters
+    from taskalloc.policies.networks import NETWORKS, count_parameters
 
     network = spec.get("network")
     if not isinstance(network, dict) or network.get("class") not in NETWORKS:
@@ -202,8 +203,8 @@ def sb3_zip_to_checkpoint(path: Path) -> Checkpoint:
 
 
 def _from_sb3(policy_kwargs: Any, state: Mapping[str, Any], taskalloc: Any, where: str) -> Checkpoint:
-    """The actor of an SB3 policy of this project (``training.sb3_policy``) from its kwargs and state dict."""
-    from policies.networks import MlpActor, PoolingActor
+    """The actor of an SB3 policy of this project (``taskalloc.training.sb3_policy``) from its kwargs and state dict."""
+    from taskalloc.policies.networks import MlpActor, PoolingActor
     from taskalloc_env.observation import OWN_FEATURES, TASK_FEATURES
 
     kwargs = policy_kwargs if isinstance(policy_kwargs, dict) else {}
@@ -240,20 +241,20 @@ def _load_sb3_zip(path: Path, allow_pickle: bool) -> Checkpoint:
     if not allow_pickle:
         raise CheckpointError(
             f"{path} is a stable-baselines3 zip: its entries are pickles, and SB3's loader runs whatever code they "
-            f"name. Convert it without unpickling (`python -m policies.checkpoint convert {path} OUT`), or, if you "
+            f"name. Convert it without unpickling (`taskalloc checkpoint convert {path} OUT`), or, if you "
             "trust the file, load it with SB3's loader from Python: LearnedPolicy.load(path, allow_pickle=True) "
             "(make_policy('learned:PATH', allow_pickle=True)); no command line loads pickles")
     from stable_baselines3.common.save_util import load_from_zip_file
 
     warnings.warn(f"allow_pickle=True: SB3's loader unpickles {path}, which runs any code the file names; "
-                  "load only files you trust, and convert them with `python -m policies.checkpoint convert`",
+                  "load only files you trust, and convert them with `taskalloc checkpoint convert`",
                   stacklevel=3)
     data, params, _ = load_from_zip_file(path, device="cpu")
     return _from_sb3(data.get("policy_kwargs"), params["policy"], data.get("taskalloc"), str(path))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m policies.checkpoint", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="taskalloc checkpoint", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     convert = sub.add_parser("convert", help="an SB3 zip of this project → a checkpoint (no unpickling)")
     convert.add_argument("zip", type=Path, help="the stable-baselines3 .zip")

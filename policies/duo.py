@@ -19,7 +19,7 @@ an agent never holds both parts of one task. Here that is:
   members are, since neither source synchronises the two).
 * ``DuoCBBAPolicy``: the CBBA policy with (4.1): a part whose other part is in the agent's own bundle is never
   bid, so the helper is always done by *another* agent than the lead.
-* ``preferred_duo_cbba``: a solver on an instance of a single-agent config (``evaluation.episodes`` runs it as
+* ``preferred_duo_cbba``: a solver on an instance of a single-agent config (``taskalloc.evaluation.episodes`` runs it as
   ``cbba-duo``): split, run CBBA with the restriction to convergence, check the exclusion.
 
 Choi et al. 2010's outer loop (thesis Alg 4) re-runs CBBA after eliminating *required* duo tasks with one part
@@ -34,8 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from policies.rollout import rollout
-from policies.scripted import CBBAPolicy
+from taskalloc.policies.rollout import rollout
+from taskalloc.policies.scripted import CBBAPolicy
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import GENERATION_FIELDS, TaskAllocConfig, to_mapping
 from taskalloc_env.env import TaskAllocEnv

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from policies.registry import make_policy
-from policies.scripted import CBGAPolicy
+from taskalloc.policies.registry import make_policy
+from taskalloc.policies.scripted import CBGAPolicy
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import TaskAllocConfig
 from taskalloc_env.observation import Scales

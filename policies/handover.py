@@ -1,7 +1,7 @@
 """One policy for the first rounds of an episode, another for the rest (ours: for measurements and learned plans).
 
-``evaluation.handover`` hands the privileged oracle over to a policy (or the reverse) to see where the policy loses
-to the optimum; ``policies.round_zero`` plays a learned round-0 plan, then a bidding policy.
+``taskalloc.evaluation.handover`` hands the privileged oracle over to a policy (or the reverse) to see where the policy
+loses to the optimum; ``taskalloc.policies.round_zero`` plays a learned round-0 plan, then a bidding policy.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from policies.base import Policy
+from taskalloc.policies.base import Policy
 
 
 class Handover(Policy):
@@ -54,6 +54,7 @@ class Handover(Policy):
 
 
 def with_partner(bidder: Policy, partner: Policy, partner_plays_round_zero: bool) -> Handover:
-    """A bidder trained with a fixed partner (``training.mappo``'s ``round_zero`` / ``later_rounds``), as it plays:
+    """A bidder trained with a fixed partner (``taskalloc.training.mappo``'s ``round_zero`` / ``later_rounds``), as it
+    plays:
     the partner in round 0 and the bidder after it, or the bidder in round 0 and the partner after it."""
     return Handover(partner, bidder, 1) if partner_plays_round_zero else Handover(bidder, partner, 1)

@@ -1,6 +1,6 @@
 """A trained bidding policy behind the same ``Policy`` interface as the scripted baselines.
 
-``LearnedPolicy.load(source)`` reads a checkpoint (``policies.checkpoint``: JSON architecture + safetensors
+``LearnedPolicy.load(source)`` reads a checkpoint (``taskalloc.policies.checkpoint``: JSON architecture + safetensors
 weights, nothing executable): a committed model by name (``train_small``, from ``models/``), a checkpoint's
 ``.json`` or stem, or a run folder holding ``model.json``. Every agent acts from its own observation with the shared
 weights (parameter sharing); the action is greedy (``deterministic=True``: the most likely kind of action — pass,
@@ -22,8 +22,8 @@ from typing import Any, Self
 
 import numpy as np
 
-from policies.base import Policy, stack_observations
-from policies.checkpoint import Checkpoint, CheckpointError, load
+from taskalloc.policies.base import Policy, stack_observations
+from taskalloc.policies.checkpoint import Checkpoint, CheckpointError, load
 from taskalloc_env import resources
 from taskalloc_env.observation import FAULT_FEATURES, POPUP_FEATURES, TEAM_FEATURES, ObservationLayout
 
@@ -44,7 +44,7 @@ def resolve(source: str | Path) -> Any:
 
 
 class LearnedPolicy(Policy):
-    """Acts with a trained actor network (``policies.networks``) for every agent it is given."""
+    """Acts with a trained actor network (``taskalloc.policies.networks``) for every agent it is given."""
 
     def __init__(self, actor: Any, own_features: tuple[str, ...], task_features: tuple[str, ...],
                  env_overrides: Mapping[str, Any] | None = None, meta: Mapping[str, Any] | None = None,
@@ -105,7 +105,7 @@ class LearnedPolicy(Policy):
 
     def decide(self, obs: np.ndarray, masks: np.ndarray) -> np.ndarray:
         """One action per row: the actor's observation (its own features only) and the action mask."""
-        from policies.networks import masked_logits
+        from taskalloc.policies.networks import masked_logits
 
         logits = masked_logits(self.actor, obs, masks).cpu().numpy().astype(np.float64)
         logits[masks == 0] = -np.inf

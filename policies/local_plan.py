@@ -4,18 +4,18 @@ In round 0 no message has been exchanged (thesis Alg 5: every agent builds its b
 agent then knows its own start, speed and equipment, the tasks, and how the scenario is drawn
 (``taskalloc_env.scenario.generate``: N agents starting uniformly on the floor, thesis §3.3.2), but not where its
 teammates start. ``LocalPlanPolicy`` uses exactly that: for agent i it draws ``samples`` teams from the generator,
-keeps its own start, solves each drawn instance (exactly, ``policies.centralised.exact``, or where that is out of
-reach with the group search ``policies.local_search``, ``solver="lns"``) and plans to bid, in
-round 0, on the tasks that i's optimal path holds in at least half of the draws, the most frequent first (a task
-its action mask forbids is skipped). From round 1 on it passes: it is meant to be handed over to another policy
-after round 0 (``policies.handover.Handover``; ``python -m evaluation.local_plan``).
+keeps its own start, solves each drawn instance (exactly, ``taskalloc.policies.centralised.exact``, or where that is out
+of reach with the group search ``taskalloc.policies.local_search``, ``solver="lns"``) and plans to bid, in round 0, on
+the tasks that i's optimal path holds in at least half of the draws, the most frequent first (a task its action mask
+forbids is skipped). From round 1 on it passes: it is meant to be handed over to another policy after round 0
+(``taskalloc.policies.handover.Handover``; ``taskalloc local-plan``).
 
-It is a measurement, like the oracle (``policies.oracle``), not a baseline: it costs N × ``samples`` solves per
-instance (about 5 s on ``train_small`` with 24 draws and ``exact``; about half a minute on the default scenario with
-``lns``, whose search is cut to ``LNS_ITERATIONS`` per draw). What it shows is how close a
-round 0 played without hearing anyone can come to the optimum's, which separates what a learned bidder lacks in
-information from what it lacks in learning (docs/learning.md). It reads the scenario only for its own agent's
-row and the tasks; a test checks that moving the teammates does not change its plan.
+It is a measurement, like the oracle (``taskalloc.policies.oracle``), not a baseline: it costs N × ``samples`` solves
+per instance (about 5 s on ``train_small`` with 24 draws and ``exact``; about half a minute on the default scenario with
+``lns``, whose search is cut to ``LNS_ITERATIONS`` per draw). What it shows is how close a round 0 played without
+hearing anyone can come to the optimum's, which separates what a learned bidder lacks in information from what it lacks
+in learning (docs/learning.md). It reads the scenario only for its own agent's row and the tasks; a test checks that
+moving the teammates does not change its plan.
 """
 
 from __future__ import annotations
@@ -26,10 +26,10 @@ from typing import Any
 
 import numpy as np
 
-from policies.base import Policy
-from policies.centralised import exact
-from policies.local_search import local_search
-from policies.oracle import bid_along
+from taskalloc.policies.base import Policy
+from taskalloc.policies.centralised import exact
+from taskalloc.policies.local_search import local_search
+from taskalloc.policies.oracle import bid_along
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import TaskAllocConfig
 from taskalloc_env.scenario import Scenario, generate

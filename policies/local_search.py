@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from policies.centralised import sgama
+from taskalloc.policies.centralised import sgama
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import TaskAllocConfig
 from taskalloc_env.scenario import Scenario, scenario_config

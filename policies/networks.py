@@ -17,8 +17,8 @@ the logits are ``[pass, bid_0 … bid_{M−1}, quit_0 … quit_{M−1}]``, inval
 * ``mlp``: a plain MLP from the flat observation to the 1 + 2M logits (fixed M).
 
 ``NETWORKS`` names every class a checkpoint may ask for; each takes only integer sizes, so a checkpoint's
-architecture is plain JSON (``policies.checkpoint``). Training wraps these actors with a critic
-(``training.sb3_policy``, ``training.mappo``).
+architecture is plain JSON (``taskalloc.policies.checkpoint``). Training wraps these actors with a critic
+(``taskalloc.training.sb3_policy``, ``taskalloc.training.mappo``).
 """
 
 from __future__ import annotations

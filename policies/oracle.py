@@ -1,14 +1,14 @@
 """A privileged policy: every agent bids along the exact optimum, through the consensus protocol.
 
 It sees the whole scenario, as no decentralised agent can, and solves it at the start of each episode with
-``policies.centralised.exact`` (``oracle-lns``: with the group search ``policies.local_search``, a lower bound on
-the optimum, for instances too large for ``exact``); then each agent bids on the first task of its path (in path
-order) that its action mask allows, and passes when none is left; it never quits. It is not a baseline: it
-measures the ceiling of the environment's action space, how close bids and passes through the protocol (Alg 5's
-bundle phase, the consensus as the dynamics) can come to the optimum, and it is the teacher of ``training.distil``.
-The optimum's size limits apply (``exact``: at most ``MAX_AGENTS`` × ``MAX_TASKS``). It reaches the optimum on
-every held-out ``train_small`` instance, under 20 % message loss too (docs/learning.md); not on every configuration
-(a limited communication range, pop-up tasks or a bundle limit can stop it).
+``taskalloc.policies.centralised.exact`` (``oracle-lns``: with the group search ``taskalloc.policies.local_search``, a
+lower bound on the optimum, for instances too large for ``exact``); then each agent bids on the first task of its path
+(in path order) that its action mask allows, and passes when none is left; it never quits. It is not a baseline: it
+measures the ceiling of the environment's action space, how close bids and passes through the protocol (Alg 5's bundle
+phase, the consensus as the dynamics) can come to the optimum, and it is the teacher of ``taskalloc.training.distil``.
+The optimum's size limits apply (``exact``: at most ``MAX_AGENTS`` × ``MAX_TASKS``). It reaches the optimum on every
+held-out ``train_small`` instance, under 20 % message loss too (docs/learning.md); not on every configuration (a limited
+communication range, pop-up tasks or a bundle limit can stop it).
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from policies.base import Policy
-from policies.centralised import exact
-from policies.local_search import local_search
+from taskalloc.policies.base import Policy
+from taskalloc.policies.centralised import exact
+from taskalloc.policies.local_search import local_search
 
 SOLVERS = {"exact": exact, "lns": local_search}
 

@@ -11,10 +11,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from policies.base import Policy
-from policies.handover import Handover, with_partner
-from policies.oracle import OraclePolicy
-from policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
+from taskalloc.policies.base import Policy
+from taskalloc.policies.handover import Handover, with_partner
+from taskalloc.policies.oracle import OraclePolicy
+from taskalloc.policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
 
 FACTORIES: dict[str, Callable[..., Policy]] = {
     "random": RandomPolicy,
@@ -61,7 +61,7 @@ def make_policy(name: str, **kwargs) -> Policy:
     ``cbgabi:delta=3``: with the quit threshold δ), ``oracle`` (privileged: bids along the exact optimum),
     ``oracle-lns`` (the same along the group search's allocation) or
     ``learned:<checkpoint>`` (a trained bidder, or a round-0 planner handed over to the
-    policy its checkpoint names, ``policies.round_zero``)."""
+    policy its checkpoint names, ``taskalloc.policies.round_zero``)."""
     if name.lower().startswith("learned:"):
         return load_learned(name.split(":", 1)[1], **kwargs)
     key, params = parse_name(name)
@@ -71,14 +71,15 @@ def make_policy(name: str, **kwargs) -> Policy:
 
 
 def load_learned(source: str, planner_allowed: bool = True, **kwargs: Any) -> Policy:
-    """``learned:<source>``: a ``LearnedPolicy``, or for a round-0 planner's checkpoint (``policies.round_zero``)
-    the planner handed over after round 0 to the policy its meta names, which may not be a planner itself (it would
-    load without end). A bidder trained with a partner (``training.mappo``'s ``round_zero`` and ``later_rounds``)
-    loads as the pair it was trained in: after the planner its meta names in ``round_zero``, or before the policy it
+    """``learned:<source>``: a ``LearnedPolicy``, or for a round-0 planner's checkpoint
+    (``taskalloc.policies.round_zero``) the planner handed over after round 0 to the policy its meta names, which may
+    not be a planner itself (it would load without end). A bidder trained with a partner (``taskalloc.training.mappo``'s
+    ``round_zero`` and ``later_rounds``) loads as the pair it was trained in: after the planner its meta names in
+    ``round_zero``, or before the policy it
     names in ``then``. ``kwargs`` are ``LearnedPolicy.load``'s options; a planner takes none."""
-    from policies.checkpoint import CheckpointError, load
-    from policies.learned import LearnedPolicy, resolve
-    from policies.round_zero import PLANNER, RoundZeroPlanner, planner_meta
+    from taskalloc.policies.checkpoint import CheckpointError, load
+    from taskalloc.policies.learned import LearnedPolicy, resolve
+    from taskalloc.policies.round_zero import PLANNER, RoundZeroPlanner, planner_meta
 
     checkpoint = load(resolve(source), allow_pickle=kwargs.pop("allow_pickle", False))
     name = kwargs.pop("name", None) or f"learned:{source}"
@@ -116,10 +117,11 @@ def load_learned(source: str, planner_allowed: bool = True, **kwargs: Any) -> Po
 
 
 def planner_pair(name: str, where: str) -> Handover:
-    """The ``Handover`` a round-0 planner's policy name (``learned:<planner checkpoint>``, ``training.planner``)
-    loads as: its planner (``first``) and the policy it hands over to (``then``); ``ConfigError`` naming ``where``
+    """The ``Handover`` a round-0 planner's policy name (``learned:<planner checkpoint>``,
+    ``taskalloc.training.planner``) loads as: its planner (``first``) and the policy it hands over to (``then``);
+    ``ConfigError`` naming ``where``
     for any other name."""
-    from policies.round_zero import RoundZeroPlanner
+    from taskalloc.policies.round_zero import RoundZeroPlanner
     from taskalloc_env.errors import ConfigError
 
     try:

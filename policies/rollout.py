@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from policies.base import Policy
+from taskalloc.policies.base import Policy
 from taskalloc_env.allocation import Allocation
 
 

@@ -1,18 +1,18 @@
-"""A learned round-0 plan, then a bidding policy: the local plan (``policies.local_plan``) learned (ours).
+"""A learned round-0 plan, then a bidding policy: the local plan (``taskalloc.policies.local_plan``) learned (ours).
 
 In round 0 no message has been exchanged (thesis Alg 5), so an agent's first bundle can only rest on what it knows
-itself. ``policies.local_plan`` plans that bundle by solving drawn teams around the agent's own start; the planner
-trained by ``training.planner`` learns the same thing from its observation: for each task, the probability that
-the task is on the agent's path in the solver's allocation. ``RoundZeroPlanner`` plays it in round 0 one of two
-ways (``replan``). Replanning (the default, and every checkpoint without the meta key): at each step it bids on the
-most likely task its mask allows while that probability is at least ``threshold``, else passes, estimating afresh
-from each state. Planning once, the local plan's way (``replan=False``): at the agent's first round-0 state it
-fixes its plan, the allowed tasks at ``threshold`` or above, most likely first (``policies.local_plan.planned``),
-and bids along it (``policies.oracle.bid_along``). The network is fitted on the states of bids along the solver's
+itself. ``taskalloc.policies.local_plan`` plans that bundle by solving drawn teams around the agent's own start; the
+planner trained by ``taskalloc.training.planner`` learns the same thing from its observation: for each task, the
+probability that the task is on the agent's path in the solver's allocation. ``RoundZeroPlanner`` plays it in round 0
+one of two ways (``replan``). Replanning (the default, and every checkpoint without the meta key): at each step it bids
+on the most likely task its mask allows while that probability is at least ``threshold``, else passes, estimating afresh
+from each state. Planning once, the local plan's way (``replan=False``): at the agent's first round-0 state it fixes its
+plan, the allowed tasks at ``threshold`` or above, most likely first (``taskalloc.policies.local_plan.planned``), and
+bids along it (``taskalloc.policies.oracle.bid_along``). The network is fitted on the states of bids along the solver's
 path, not along its own estimates, so the later round-0 states a replanning agent reaches are ones it never saw in
 training; planning once reads only the first state, the one the local plan reads too. Replanning plays better
-(docs/decisions.md, "the round 0 learned"). It passes in every later round; a planner checkpoint names the policy
-that takes over (``then``), and ``policies.registry`` loads the pair as one policy, so ``learned:<planner
+(docs/decisions.md, "the round 0 learned"). It passes in every later round; a planner checkpoint names the policy that
+takes over (``then``), and ``taskalloc.policies.registry`` loads the pair as one policy, so ``learned:<planner
 checkpoint>`` runs anywhere a policy name does. Execution stays decentralised: each agent reads only its own
 observation.
 """
@@ -24,11 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from policies.base import stack_observations
-from policies.checkpoint import Checkpoint, CheckpointError
-from policies.learned import LearnedPolicy
-from policies.local_plan import planned
-from policies.oracle import bid_along
+from taskalloc.policies.base import stack_observations
+from taskalloc.policies.checkpoint import Checkpoint, CheckpointError
+from taskalloc.policies.learned import LearnedPolicy
+from taskalloc.policies.local_plan import planned
+from taskalloc.policies.oracle import bid_along
 
 PLANNER = "round0-planner"      # the checkpoint's meta["algo"] of a planner
 
@@ -41,7 +41,7 @@ def is_threshold(value: Any) -> bool:
 class RoundZeroPlanner(LearnedPolicy):
     """Round 0: bids on the allowed tasks most likely on its path while that probability is ≥ ``threshold``,
     re-estimated at every step (``replan``) or fixed at the agent's first state; later rounds: passes. The actor's
-    bid logits are read as per-task log-odds (``training.planner``)."""
+    bid logits are read as per-task log-odds (``taskalloc.training.planner``)."""
 
     def __init__(self, *args: Any, threshold: float = 0.5, replan: bool = True, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
@@ -93,7 +93,7 @@ class RoundZeroPlanner(LearnedPolicy):
 
 def bid_log_odds(actor: Any, obs: Any) -> Any:
     """(B, M) tensor: the actor's bid logits with every action unmasked, read as the log-odds that each task is on
-    the agent's path (what ``training.planner`` fits), for observations (B, D) as a tensor."""
+    the agent's path (what ``taskalloc.training.planner`` fits), for observations (B, D) as a tensor."""
     import torch as th
 
     m = (obs.shape[1] - actor.own_size) // actor.task_size

@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from policies.base import Policy, stack_observations
-from policies.greedy import greedy_actions
+from taskalloc.policies.base import Policy, stack_observations
+from taskalloc.policies.greedy import greedy_actions
 from taskalloc_env import kernels
 from taskalloc_env.observation import ObservationLayout
 
@@ -96,7 +96,8 @@ class CBGAPolicy(Policy):
         """Actions (A,) from action masks (A, 1 + 2M) and the observation's task ``columns`` (A, M) — gain, and with
         team bidding the group total (and the displaced bid for ``net``): the first allowed quit (task order), else
         the best allowed bid (lowest task id on ties), else pass. The one home of the rule, for ``act`` and for the
-        direct solver (``policies.fast``): ``policies.greedy.greedy_actions`` compiled, else ``choose_reference``."""
+        direct solver (``taskalloc.policies.fast``): ``taskalloc.policies.greedy.greedy_actions`` compiled, else
+        ``choose_reference``."""
         if not kernels.COMPILED:
             return self.choose_reference(mask, gain, group_total, displaced_bid)
         return greedy_actions(mask, gain, gain if group_total is None else group_total,
@@ -105,7 +106,7 @@ class CBGAPolicy(Policy):
 
     def choose_reference(self, mask: np.ndarray, gain: np.ndarray, group_total: np.ndarray | None = None,
                          displaced_bid: np.ndarray | None = None) -> np.ndarray:
-        """``choose`` in numpy (the reference of ``policies.greedy.greedy_actions``)."""
+        """``choose`` in numpy (the reference of ``taskalloc.policies.greedy.greedy_actions``)."""
         m = gain.shape[1]
         valid = mask[:, 1: m + 1]
         value = gain

@@ -6,8 +6,8 @@ So on a square floor (W = D) a mirror or quarter turn of an instance is an insta
 the same allocation turned with it. In an observation only four kinds of column move: the agent's own ``x`` and
 ``y`` (÷ the arena, so in [0, 1]) and each task's ``dx`` and ``dy``; every other column is a distance, time, bid,
 flag or count, and stays. Each symmetry is thus a column permutation, a sign and a shift:
-``turned = obs[:, permutation] · sign + shift``. ``training.planner`` draws one per state (``augment``) and
-``policies.round_zero`` averages its estimate over all eight (``symmetric``).
+``turned = obs[:, permutation] · sign + shift``. ``taskalloc.training.planner`` draws one per state (``augment``) and
+``taskalloc.policies.round_zero`` averages its estimate over all eight (``symmetric``).
 """
 
 from __future__ import annotations

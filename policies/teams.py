@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from policies.base import Policy
-from policies.registry import make_policy
+from taskalloc.policies.base import Policy
+from taskalloc.policies.registry import make_policy
 
 
 def check_scripted_agents(scripted_agents: Mapping[str, str] | None, possible_agents: list[str]) -> dict[str, str]:

@@ -5,4 +5,4 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-.venv/bin/python -m policies compare --scenario default --episodes 20 --out results/compare --overwrite "$@"
+.venv/bin/taskalloc compare --scenario default --episodes 20 --out results/compare --overwrite "$@"

@@ -349,7 +349,7 @@ def episode_digest(args: tuple[str, dict, int]) -> str:
     import hashlib
     import json
 
-    from policies import make_policy
+    from taskalloc.policies import make_policy
 
     policy_name, overrides, seed = args
     p = make_policy(policy_name)

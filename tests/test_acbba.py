@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from helpers import agent, build, episode_digest, task
 
-from evaluation import acbba_check
-from policies import make_policy, rollout
+from taskalloc.evaluation import acbba_check
+from taskalloc.policies import make_policy, rollout
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.async_consensus import compose
 from taskalloc_env.async_protocol import AsyncProtocol
@@ -28,7 +28,7 @@ DMG = {"distance_cost": "from_start", "marginal_gain": "frozen", "agents_per_tas
 
 # -- ACBBA against synchronous CBBA (Johnson §1.2: "the task space convergence properties of nominal CBBA") -----------
 def test_acbba_converges_agrees_and_matches_cbba_on_random_dmg_scenarios():
-    """A smaller run of ``python -m evaluation.acbba_check`` (1000 scenarios, docs/results.md): every ACBBA run goes
+    """A smaller run of ``taskalloc acbba-check`` (1000 scenarios, docs/results.md): every ACBBA run goes
     quiet conflict-free in agreement, and its allocation equals CBBA's or the difference is stale information."""
     verdicts = acbba_check.run_checks(60, {}, jobs=1)
     text, ok = acbba_check.report(verdicts)
@@ -393,7 +393,7 @@ def test_a_disagreement_at_rest_comes_only_from_a_link_that_lost_every_message()
     agent 1 keeps its own older, lower bid. ACBBA never resends (docs/decisions.md "lost messages"), so the fuzz
     excuses a disagreement only when the last message between the two agents was lost; without the bad state the
     same run agrees."""
-    from evaluation import fuzz
+    from taskalloc.evaluation import fuzz
 
     case = (FUZZ_1262656425, "cbga+tb", 1262656425)
     verdict = fuzz.run_case(case)
@@ -426,7 +426,7 @@ def test_the_outbid_bump_can_livelock_a_complete_graph_and_the_detector_sees_the
     later record alive, so 0 and 3 bid again. The tables cycle with period 5 ticks while the bundles move through
     the same few states: the documented phantom of the bump (docs/decisions.md), recognised by ``livelocked`` (no
     new bundle state for the later half) and accepted by the fuzz. Either option at its default converges."""
-    from evaluation import fuzz
+    from taskalloc.evaluation import fuzz
 
     seed = 1832714987
     env = TaskAllocEnv(**LIVELOCK_1832714987)

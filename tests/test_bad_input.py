@@ -19,11 +19,11 @@ from typing import Any
 
 import pytest
 
-from evaluation import experiments
-from policies import make_policy
-from policies.__main__ import main as compare_main
-from policies.checkpoint import CheckpointError
-from policies.learned import LearnedPolicy
+from taskalloc.evaluation import experiments
+from taskalloc.policies import make_policy
+from taskalloc.cli import main as compare_main
+from taskalloc.policies.checkpoint import CheckpointError
+from taskalloc.policies.learned import LearnedPolicy
 from taskalloc_env import Agent, ConfigError, Scenario, Task, TaskAllocEnv, resolve_config
 from taskalloc_env.errors import run_cli
 from taskalloc_env.protocol import check_memory
@@ -170,7 +170,8 @@ def test_crafted_pickle_checkpoint_is_refused_and_runs_nothing(entry, tmp_path):
     with pytest.raises(CheckpointError) as info:
         LearnedPolicy.load(str(path)) if entry == "LearnedPolicy.load" else make_policy(f"learned:{path}")
     text = str(info.value)
-    assert "stable-baselines3 zip" in text and "allow_pickle=True" in text and "policies.checkpoint convert" in text
+    assert "stable-baselines3 zip" in text and "allow_pickle=True" in text
+    assert "taskalloc checkpoint convert" in text
     assert "--allow-pickle" not in text                        # no command line has such a flag
     assert not marker.exists()
 
@@ -215,7 +216,7 @@ def test_compare_refuses_an_existing_output_folder(tmp_path):
     out.mkdir()
     (out / "compare.md").write_text("committed table\n")
     before = _snapshot(out)
-    result = cli("-m", "policies", "compare", "--episodes", "2", "--no-learned", "--out", str(out))
+    result = cli("-m", "taskalloc", "compare", "--episodes", "2", "--no-learned", "--out", str(out))
     _one_error_line(result, f"--out {out}", "not empty", "--overwrite")
     assert result.stdout == "" and _snapshot(out) == before
 
@@ -276,7 +277,7 @@ def test_experiment_run_refuses_existing_results_and_docs(tmp_path):
     (out / "tiny" / "table.md").write_text("committed\n")
     docs.write_text("# Results\n\n<!-- results:tiny:start -->\nold\n<!-- results:tiny:end -->\n")
     before = _snapshot(tmp_path)
-    base = ("-m", "evaluation.experiments", "run", str(path), "--jobs", "1", "--no-progress")
+    base = ("-m", "taskalloc", "experiments", "run", str(path), "--jobs", "1", "--no-progress")
     _one_error_line(cli(*base, "--out", str(out), "--no-docs"), f"{out / 'tiny'}", "not empty", "--overwrite")
     _one_error_line(cli(*base, "--out", str(tmp_path / "new"), "--docs", str(docs)),
                     str(docs), "already holds the results of tiny", "--overwrite", "--no-docs")
@@ -290,7 +291,7 @@ def test_experiment_run_overwrites_when_asked(tmp_path):
     out = tmp_path / "out"
     (out / "tiny").mkdir(parents=True)
     (out / "tiny" / "table.md").write_text("committed\n")
-    result = cli("-m", "evaluation.experiments", "run", str(path), "--jobs", "1", "--no-progress", "--out",
+    result = cli("-m", "taskalloc", "experiments", "run", str(path), "--jobs", "1", "--no-progress", "--out",
                  str(out), "--no-docs", "--overwrite")
     assert result.returncode == 0, result.stderr
     assert (out / "tiny" / "table.md").read_text() != "committed\n"
@@ -302,8 +303,8 @@ def test_main_script_regenerates_the_committed_table_with_overwrite():
 
 
 @pytest.mark.parametrize(("command", "written"), [
-    (("-m", "evaluation.figures", "links"), "fig.png"),
-    (("-m", "evaluation.acbba_experiments", "sweep", "--seeds", "1", "--jobs", "1"), "sweep.md"),
+    (("-m", "taskalloc", "figures", "links"), "fig.png"),
+    (("-m", "taskalloc", "acbba-experiments", "sweep", "--seeds", "1", "--jobs", "1"), "sweep.md"),
 ])
 def test_figure_and_acbba_commands_refuse_to_replace_results(tmp_path, command, written):
     out = tmp_path / "out"

@@ -24,7 +24,7 @@ from helpers import (
     task,
 )
 
-from policies import (
+from taskalloc.policies import (
     CBBAPolicy,
     CBGAPolicy,
     OraclePolicy,

@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from evaluation import dropout, experiments, figures, robustness
-from evaluation.episodes import Episode, _env, run_episode
-from evaluation.report import cell_text, values
-from policies import make_policy, rollout
+from taskalloc.evaluation import dropout, experiments, figures, robustness
+from taskalloc.evaluation.episodes import Episode, _env, run_episode
+from taskalloc.evaluation.report import cell_text, values
+from taskalloc.policies import make_policy, rollout
 from taskalloc_env import TaskAllocEnv, resolve_config
 
 

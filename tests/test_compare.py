@@ -1,4 +1,4 @@
-"""``python -m policies compare``: every row, CBBA only where it applies, outputs, determinism, learned skips."""
+"""``taskalloc compare``: every row, CBBA only where it applies, outputs, determinism, learned skips."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import csv
 
 import pytest
 
-from policies.__main__ import main
+from taskalloc.cli import main
 
 BASELINE_ROWS = ("random", "CBGA", "CBGA+TQ", "CBGA+TB", "CBGABI", "SGAMA", "LNS")
 

@@ -1,4 +1,5 @@
-"""The oracle's targets and the distillation of the optimum (``policies.oracle``, ``training.distil``)."""
+"""The oracle's targets and the distillation of the optimum (``taskalloc.policies.oracle``,
+``taskalloc.training.distil``)."""
 
 from __future__ import annotations
 
@@ -9,9 +10,9 @@ import numpy as np
 import pytest
 import torch as th
 
-from policies import OraclePolicy, make_policy, rollout
+from taskalloc.policies import OraclePolicy, make_policy, rollout
+from taskalloc.training import distil
 from taskalloc_env import ConfigError, TaskAllocEnv
-from training import distil
 
 
 def test_the_oracles_targets_are_allowed_actions_and_hold_its_own_choice():

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from evaluation.episodes import Episode, run_episode, skip_reason
-from policies import CBBAPolicy, rollout
-from policies.duo import DuoCBBAPolicy, both_parts, duo_env, duo_partners, preferred_duo_cbba, split_duo
+from taskalloc.evaluation.episodes import Episode, run_episode, skip_reason
+from taskalloc.policies import CBBAPolicy, rollout
+from taskalloc.policies.duo import DuoCBBAPolicy, both_parts, duo_env, duo_partners, preferred_duo_cbba, split_duo
 from taskalloc_env import Agent, Scenario, Task, TaskAllocEnv, resolve_config
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.scoring import ScoringModel

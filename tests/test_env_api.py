@@ -29,7 +29,7 @@ from pettingzoo.test import (
 )
 
 import taskalloc_env
-from policies import CBGAPolicy
+from taskalloc.policies import CBGAPolicy
 from taskalloc_env import InvalidActionError, TaskAllocEnv, taskalloc_v0
 from taskalloc_env.observation import TASK_FEATURES
 
@@ -229,7 +229,7 @@ def test_the_default_step_limit_never_cuts_a_round_the_bound_allows(consensus):
     """``max_cycles`` defaults to ``step_bound`` = T_max · (M + 1)² (sync) or T_max (one round per step): no sync
     round takes more than (M + 1)² steps, even under a random policy that quits and re-bids (``quit_block=none``
     lets a quit task be re-bid; a quit drops what follows it, which may be bid again)."""
-    from policies import make_policy
+    from taskalloc.policies import make_policy
 
     assert TaskAllocEnv(max_cycles=7).max_cycles == 7
     longest = 0

@@ -10,9 +10,17 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from evaluation import experiments
-from evaluation.episodes import Episode, check_pairing, fingerprint, run_episode, run_episodes
-from evaluation.stats import ci95_half, mean_sd, paired, paired_t_pvalue, share_better, share_tied, wilcoxon_pvalue
+from taskalloc.evaluation import experiments
+from taskalloc.evaluation.episodes import Episode, check_pairing, fingerprint, run_episode, run_episodes
+from taskalloc.evaluation.stats import (
+    ci95_half,
+    mean_sd,
+    paired,
+    paired_t_pvalue,
+    share_better,
+    share_tied,
+    wilcoxon_pvalue,
+)
 from taskalloc_env import TaskAllocEnv, resolve_config, resources
 
 SMALL = {"n_agents": 4, "n_tasks": 6, "agents_per_task": 2, "start_time_range": [0.0, 30.0]}
@@ -184,8 +192,8 @@ def test_checks_test_the_claim_on_paired_cells():
 
 # -- δ reaches the quitting policies; grid sweeps and heat maps ------------------------------------------------------
 def test_a_delta_sweep_reaches_the_quitting_policy():
-    from evaluation import episodes
-    from policies import CBGAPolicy
+    from taskalloc.evaluation import episodes
+    from taskalloc.policies import CBGAPolicy
 
     assert CBGAPolicy(task_quitting=True).env_overrides == {"task_quitting": True}    # δ from the environment
     rounds = {}
@@ -200,8 +208,8 @@ def test_a_delta_sweep_reaches_the_quitting_policy():
 
 
 def test_a_pinned_policy_may_not_overrule_a_swept_option(monkeypatch):
-    from evaluation import episodes
-    from policies import CBGAPolicy
+    from taskalloc.evaluation import episodes
+    from taskalloc.policies import CBGAPolicy
 
     monkeypatch.setattr(episodes, "policy_for", lambda solver: CBGAPolicy(task_quitting=True, quit_threshold=2))
     assert episodes.policy_overrides("pinned", resolve_config("default")) == {"task_quitting": True, "delta": 2}

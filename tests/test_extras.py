@@ -12,7 +12,7 @@ BLOCK = "import sys; sys.modules[{name!r}] = None; "     # a None entry makes `i
 
 @pytest.mark.parametrize(("blocked", "module", "extra"), [
     ("torch", "training", "taskalloc[train]"),
-    ("sb3_contrib", "training.train", "taskalloc[train]"),
+    ("sb3_contrib", "taskalloc.training.train", "taskalloc[train]"),
 ])
 def test_a_missing_extra_is_named(blocked, module, extra):
     code = BLOCK.format(name=blocked) + f"import {module}"

@@ -1,13 +1,14 @@
-"""The direct solver (``policies.fast.solve``) reaches exactly the allocation, counters included, of an episode."""
+"""The direct solver (``taskalloc.policies.fast.solve``) reaches exactly the allocation, counters included, of an
+episode."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from evaluation.fuzz import draw_config
-from policies import make_policy, rollout
-from policies.fast import solvable, solve
+from taskalloc.evaluation.fuzz import draw_config
+from taskalloc.policies import make_policy, rollout
+from taskalloc.policies.fast import solvable, solve
 from taskalloc_env import TaskAllocEnv, resolve_config
 
 POLICIES = ("cbga", "cbga+tb", "cbga+tq", "cbgabi")

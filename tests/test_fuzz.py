@@ -1,10 +1,10 @@
-"""The fuzz (``python -m evaluation.fuzz``) on a fixed budget: random scenarios over every option, every policy."""
+"""The fuzz (``taskalloc fuzz``) on a fixed budget: random scenarios over every option, every policy."""
 
 from __future__ import annotations
 
 import pytest
 
-from evaluation import fuzz
+from taskalloc.evaluation import fuzz
 
 
 def test_a_short_fuzz_finds_nothing():

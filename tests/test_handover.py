@@ -1,4 +1,5 @@
-"""The hand-over between the oracle and a policy (``evaluation.handover``): who acts when, and its command line."""
+"""The hand-over between the oracle and a policy (``taskalloc.evaluation.handover``): who acts when, and its command
+line."""
 
 from __future__ import annotations
 
@@ -8,9 +9,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from evaluation import handover
-from policies import OraclePolicy, Policy, make_policy, rollout
-from policies.handover import Handover
+from taskalloc.evaluation import handover
+from taskalloc.policies import OraclePolicy, Policy, make_policy, rollout
+from taskalloc.policies.handover import Handover
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.errors import run_cli
 

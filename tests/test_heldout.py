@@ -1,4 +1,4 @@
-"""``evaluation.heldout``: the quick table's rows on the same held-out instances, the centralised ones ordered
+"""``taskalloc.evaluation.heldout``: the quick table's rows on the same held-out instances, the centralised ones ordered
 SGAMA ≤ LNS ≤ the exact optimum, and its markdown measured against CBGABI and the optimum."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from evaluation import heldout
+from taskalloc.evaluation import heldout
 
 
 @pytest.mark.slow

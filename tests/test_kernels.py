@@ -289,9 +289,10 @@ def test_compiled_view_rows_equal_the_reference(case):
 @given(st.integers(1, 5), st.integers(1, 7), st.sampled_from(["cbga", "cbga+tb", "cbga+tq", "cbgabi", "cbba"]),
        st.sampled_from(["net", "literal"]), st.sampled_from([np.float32, np.float64]), st.integers(0, 2**32 - 1))
 def test_compiled_rule_equals_the_reference(n, m, name, team_value, dtype, seed):
-    """``policies.greedy.greedy_actions`` and ``CBGAPolicy.choose_reference`` on random masks and columns, with
+    """``taskalloc.policies.greedy.greedy_actions`` and ``CBGAPolicy.choose_reference`` on random masks and columns,
+    with
     ties, sums that tie only in ``dtype``, NaN and infinities: the same actions."""
-    from policies import make_policy
+    from taskalloc.policies import make_policy
 
     policy = make_policy(name)
     policy.team_value = team_value
@@ -310,7 +311,7 @@ def test_compiled_rule_equals_the_reference(n, m, name, team_value, dtype, seed)
 def test_the_compiled_rule_adds_in_the_columns_dtype(team_value):
     """1 + 1e-8 is 1 in float32: the two bids tie and the lower task id wins, as in numpy; in float64 the second
     would win."""
-    from policies import make_policy
+    from taskalloc.policies import make_policy
 
     policy = make_policy("cbgabi")
     policy.team_value = team_value
@@ -339,8 +340,8 @@ def test_compiled_observations_equal_the_reference(sample):
     """Every step of random-policy episodes on fuzzed configs (faults, pop-ups, ACBBA, task quitting included):
     ``observe`` with the compiled step features gives the same observation and mask bytes as
     ``observe_reference``; the kernel writes the own columns the layout names."""
-    from evaluation.fuzz import draw_config
-    from policies import make_policy
+    from taskalloc.evaluation.fuzz import draw_config
+    from taskalloc.policies import make_policy
     from taskalloc_env import TaskAllocEnv
     from taskalloc_env.kernels.observe import BUNDLE_SIZE, PASSED, ROUND
     from taskalloc_env.observation import OWN_FEATURES
@@ -371,8 +372,8 @@ def test_compiled_observations_equal_the_reference(sample):
 def test_compiled_quit_conditions_equal_the_reference(sample):
     """Every step of random-policy episodes on fuzzed configs with task quitting: ``kernels.quits.quittable`` and
     ``Protocol.quittable_reference`` agree, without the timer and with timers around the round, and quits happen."""
-    from evaluation.fuzz import draw_config
-    from policies import make_policy
+    from taskalloc.evaluation.fuzz import draw_config
+    from taskalloc.policies import make_policy
     from taskalloc_env import TaskAllocEnv
 
     rng, extra = np.random.default_rng(500 + sample), np.random.default_rng([500 + sample, 2])
@@ -397,8 +398,8 @@ def test_compiled_quit_conditions_equal_the_reference(sample):
 @pytest.mark.parametrize("sample", range(2))
 def test_allocations_with_the_kernels_equal_those_with_the_references(sample, monkeypatch):
     """End to end on fuzzed configs: the same paths, groups and counters; scores to the last bit of exp."""
-    from evaluation.fuzz import draw_config
-    from policies.fast import solvable, solve
+    from taskalloc.evaluation.fuzz import draw_config
+    from taskalloc.policies.fast import solvable, solve
     from taskalloc_env import TaskAllocEnv, resolve_config
 
     rng, extra, checked = np.random.default_rng(100 + sample), np.random.default_rng([100 + sample, 2]), 0

@@ -1,20 +1,39 @@
 """The packages form layers that only import downwards, and no package's modules import each other in a cycle.
 
-taskalloc_env (the environment) < policies (every policy and the centralised solvers) < evaluation (paired runs,
-statistics, reports, experiments) < training (reinforcement learning) < benchmarks (speed scripts). Imports inside
-functions count too. ``__main__`` modules are command entry points that nothing imports; they are left out.
+taskalloc_env (the environment) < taskalloc.policies (every policy and the centralised solvers) < taskalloc.evaluation
+(paired runs, statistics, reports, experiments) < taskalloc.training (reinforcement learning) < taskalloc.cli (the
+console command) < benchmarks (speed scripts) < research (studies outside the wheel). Imports inside functions count
+too. ``__main__`` modules are command entry points that nothing imports; they are left out. The product (everything
+below ``benchmarks``) never imports ``research``, and the built wheel holds only the two namespaces.
 """
 
 from __future__ import annotations
 
 import ast
 import graphlib
+import subprocess
+import sys
+import zipfile
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-LAYERS = ("taskalloc_env", "policies", "evaluation", "training", "benchmarks")
+LAYERS = ("taskalloc_env", "taskalloc.policies", "taskalloc.evaluation", "taskalloc.training", "taskalloc.cli",
+          "benchmarks", "research")
+# the folder of each layer in a checkout (the wheel maps policies/ to taskalloc/policies/, see pyproject.toml)
+FOLDERS = {"taskalloc_env": "taskalloc_env", "taskalloc.policies": "policies", "taskalloc.evaluation": "evaluation",
+           "taskalloc.training": "training", "taskalloc.cli": "taskalloc", "benchmarks": "benchmarks",
+           "research": "research"}
+PRODUCT = LAYERS[: LAYERS.index("benchmarks")]
+
+
+def layer(name: str) -> str | None:
+    """The layer a dotted module name belongs to (``taskalloc`` itself and ``taskalloc.cli`` are the command layer)."""
+    for candidate in sorted(LAYERS, key=len, reverse=True):
+        if name == candidate or name.startswith(candidate + "."):
+            return candidate
+    return "taskalloc.cli" if name == "taskalloc" else None
 
 
 def project_imports(path: Path) -> set[str]:
@@ -26,16 +45,17 @@ def project_imports(path: Path) -> set[str]:
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             names.add(node.module)
             names.update(f"{node.module}.{alias.name}" for alias in node.names)
-    return {n for n in names if n.split(".")[0] in LAYERS}
+    return {n for n in names if layer(n) is not None}
 
 
 def modules() -> dict[str, Path]:
     found = {}
-    for package in LAYERS:
-        for path in sorted((ROOT / package).rglob("*.py")):
+    for package, folder in FOLDERS.items():
+        for path in sorted((ROOT / folder).rglob("*.py")):
             if path.name == "__main__.py":
                 continue
-            dotted = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+            parts = path.relative_to(ROOT / folder).with_suffix("").parts
+            dotted = ".".join((package, *parts)) if package != "taskalloc.cli" else ".".join(("taskalloc", *parts))
             found[dotted.removesuffix(".__init__")] = path
     return found
 
@@ -45,10 +65,10 @@ def test_packages_import_only_lower_layers(package):
     rank = LAYERS.index(package)
     upward = []
     for name, path in modules().items():
-        if name.split(".")[0] != package:
+        if layer(name) != package:
             continue
         for imported in project_imports(path):
-            if LAYERS.index(imported.split(".")[0]) > rank:
+            if LAYERS.index(layer(imported)) > rank:
                 upward.append(f"{path.relative_to(ROOT)} imports {imported}")
     assert not upward, "imports from a higher layer:\n" + "\n".join(upward)
 
@@ -66,5 +86,31 @@ def test_no_import_cycles_between_modules():
 def test_the_check_sees_an_upward_import(tmp_path):
     """The checker itself catches a lower layer importing a higher one (so the tests above can fail)."""
     bad = tmp_path / "bad.py"
-    bad.write_text("def f():\n    from training.train import main\n")
-    assert "training.train" in project_imports(bad)
+    bad.write_text("def f():\n    from taskalloc.training.train import main\n")
+    assert "taskalloc.training.train" in project_imports(bad)
+    assert layer("taskalloc.training.train") == "taskalloc.training" and layer("research.planner") == "research"
+
+
+def test_no_module_imports_the_bare_folder_names():
+    """Code imports ``taskalloc.policies``, never the checkout's folder ``policies`` (which the wheel does not have)."""
+    bare = []
+    for path in [p for folder in FOLDERS.values() for p in (ROOT / folder).rglob("*.py")] + list(
+            (ROOT / "tests").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module] if isinstance(node, ast.ImportFrom) and node.module and node.level == 0 else [])
+            bare += [f"{path.relative_to(ROOT)}: {n}" for n in names
+                     if n.split(".")[0] in {"policies", "evaluation", "training"}]
+    assert not bare, "imports of bare folder names:\n" + "\n".join(bare)
+
+
+@pytest.mark.slow
+def test_the_wheel_holds_one_namespace_and_no_research(tmp_path):
+    """Build the wheel and read its entries: top-level names are ``taskalloc`` and ``taskalloc_env`` only."""
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path), str(ROOT)],
+                   check=True, capture_output=True, timeout=600)
+    entries = zipfile.ZipFile(next(tmp_path.glob("taskalloc-*.whl"))).namelist()
+    tops = {e.split("/")[0] for e in entries if not e.split("/")[0].endswith(".dist-info")}
+    assert tops == {"taskalloc", "taskalloc_env"}, tops
+    assert "taskalloc/policies/__init__.py" in entries and "taskalloc/training/mappo.py" in entries
+    assert not [e for e in entries if "research" in e.split("/") or e.startswith(("tests/", "benchmarks/"))]

@@ -14,8 +14,8 @@ import pytest
 pytest.importorskip("torch")
 pytest.importorskip("safetensors")
 
-from policies import make_policy, rollout
-from policies.learned import LearnedPolicy, feature_columns
+from taskalloc.policies import make_policy, rollout
+from taskalloc.policies.learned import LearnedPolicy, feature_columns
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.observation import ObservationLayout
 

@@ -1,5 +1,5 @@
-"""``evaluation.learning_report``: the message-loss and delay sets are paired draw for draw, and runs whose weights
-are gone keep their archived rows and training logs."""
+"""``taskalloc.evaluation.learning_report``: the message-loss and delay sets are paired draw for draw, and runs whose
+weights are gone keep their archived rows and training logs."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from evaluation import learning_report as lr
-from policies import make_policy, rollout
+from taskalloc.evaluation import learning_report as lr
+from taskalloc.policies import make_policy, rollout
 from taskalloc_env import TaskAllocEnv, resolve_config
 from taskalloc_env import network as netmod
 from taskalloc_env.scenario import generate
@@ -150,7 +150,7 @@ def test_the_room_table_measures_the_learned_share_against_the_best_allocation_k
 def test_the_centralised_rows_do_not_depend_on_the_network(setting):
     """Why the loss and delay sets copy SGAMA, LNS and the exact optimum from the perfect-link set: they send no
     message."""
-    from evaluation.episodes import Episode, run_episodes
+    from taskalloc.evaluation.episodes import Episode, run_episodes
 
     perfect = resolve_config("train_small")
     faulty = resolve_config("train_small", **lr.SETTINGS[setting].overrides)

@@ -16,8 +16,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from policies import make_policy, rollout, sgama
-from policies.fast import solve
+from taskalloc.policies import make_policy, rollout, sgama
+from taskalloc.policies.fast import solve
 from taskalloc_env import Agent, Scenario, Task, TaskAllocEnv, taskalloc_v0
 from taskalloc_env.config import resolve_config
 

@@ -1,4 +1,5 @@
-"""The local plan (``policies.local_plan``): a round 0 from one agent's own knowledge, and its command line."""
+"""The local plan (``taskalloc.policies.local_plan``): a round 0 from one agent's own knowledge, and its command
+line."""
 
 from __future__ import annotations
 
@@ -7,11 +8,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from evaluation import local_plan
-from policies import make_policy, rollout
-from policies.centralised import exact
-from policies.handover import Handover
-from policies.local_plan import SOLVERS, LocalPlanPolicy
+from taskalloc.evaluation import local_plan
+from taskalloc.policies import make_policy, rollout
+from taskalloc.policies.centralised import exact
+from taskalloc.policies.handover import Handover
+from taskalloc.policies.local_plan import SOLVERS, LocalPlanPolicy
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.errors import run_cli
 

@@ -1,5 +1,5 @@
-"""The group search (``policies.local_search``): a feasible allocation scored like every other solver, between SGAMA
-and the exact optimum, equipment carriers chosen first, deterministic, near the optimum on ``train_small``.
+"""The group search (``taskalloc.policies.local_search``): a feasible allocation scored like every other solver, between
+SGAMA and the exact optimum, equipment carriers chosen first, deterministic, near the optimum on ``train_small``.
 
 The search is ours (no source describes it); the rules it keeps are the sources': time windows (3.7), equipment
 (3.5), L_j members per task (3.3)–(3.4), the team score of thesis §5.3.1 (``helpers.reference_team_score``).
@@ -14,9 +14,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from test_properties import scenario_config
 
-from evaluation.episodes import Episode, run_episode
-from policies import exact, local_search, sgama
-from policies.local_search import GroupSearch
+from taskalloc.evaluation.episodes import Episode, run_episode
+from taskalloc.policies import exact, local_search, sgama
+from taskalloc.policies.local_search import GroupSearch
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.config import resolve_config
 from taskalloc_env.scenario import scenario_config as config_of

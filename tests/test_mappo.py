@@ -1,5 +1,6 @@
-"""MAPPO (``training.mappo``): the critic sees ``env.state()`` and the actor does not, rollouts store each step,
-checkpoints reproduce actions exactly, the attention actor is a set function of the tasks, and a short run learns."""
+"""MAPPO (``taskalloc.training.mappo``): the critic sees ``env.state()`` and the actor does not, rollouts store each
+step, checkpoints reproduce actions exactly, the attention actor is a set function of the tasks, and a short run
+learns."""
 
 from __future__ import annotations
 
@@ -10,15 +11,15 @@ import numpy as np
 import pytest
 import torch as th
 
-from evaluation.seeds import VALIDATION_SEED_START
-from policies import make_policy, rollout
-from policies.handover import Handover
-from policies.learned import LearnedPolicy
-from policies.networks import MASKED_LOGIT, AttentionActor, masked_logits
-from policies.round_zero import RoundZeroPlanner
+from taskalloc.evaluation.seeds import VALIDATION_SEED_START
+from taskalloc.policies import make_policy, rollout
+from taskalloc.policies.handover import Handover
+from taskalloc.policies.learned import LearnedPolicy
+from taskalloc.policies.networks import MASKED_LOGIT, AttentionActor, masked_logits
+from taskalloc.policies.round_zero import RoundZeroPlanner
+from taskalloc.training import mappo
+from taskalloc.training.critic import StateCritic, state_tokens
 from taskalloc_env import ConfigError, TaskAllocEnv
-from training import mappo
-from training.critic import StateCritic, state_tokens
 
 ENV = {"scenario": "train_small", "task_quitting": True, "delta": 1}
 

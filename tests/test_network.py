@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from helpers import agent, build, episode_digest, task
 
-from policies import make_policy, rollout
+from taskalloc.policies import make_policy, rollout
 from taskalloc_env import ConfigError, TaskAllocConfig, TaskAllocEnv
 from taskalloc_env.network import CommGraph, Deliveries, GilbertElliott, IndependentLoss, Network
 

@@ -20,7 +20,7 @@ from typing import Any
 
 import pytest
 
-from policies import make_policy, rollout
+from taskalloc.policies import make_policy, rollout
 from taskalloc_env import TaskAllocEnv
 
 FIXTURE = Path(__file__).parent / "data" / "perfect_network_04b92bb.json"

@@ -1,4 +1,4 @@
-"""How much of the local plan a learned round-0 planner has learned (``evaluation.plan_fit``)."""
+"""How much of the local plan a learned round-0 planner has learned (``taskalloc.evaluation.plan_fit``)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from evaluation import plan_fit
+from taskalloc.evaluation import plan_fit
 from taskalloc_env.errors import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,5 +1,5 @@
 """The learned round-0 plan: its labels, its loss, how it plays and hands over, its checkpoint and its command line
-(``training.planner``, ``policies.round_zero``)."""
+(``taskalloc.training.planner``, ``taskalloc.policies.round_zero``)."""
 
 from __future__ import annotations
 
@@ -12,15 +12,15 @@ import pytest
 import torch as th
 from helpers import assert_same_actions
 
-from policies import OraclePolicy, make_policy, rollout
-from policies.base import stack_observations
-from policies.checkpoint import CheckpointError
-from policies.handover import Handover
-from policies.networks import PoolingActor
-from policies.round_zero import RoundZeroPlanner, bid_log_odds
+from taskalloc.policies import OraclePolicy, make_policy, rollout
+from taskalloc.policies.base import stack_observations
+from taskalloc.policies.checkpoint import CheckpointError
+from taskalloc.policies.handover import Handover
+from taskalloc.policies.networks import PoolingActor
+from taskalloc.policies.round_zero import RoundZeroPlanner, bid_log_odds
+from taskalloc.training import planner
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.errors import run_cli
-from training import planner
 
 OVERRIDES = {"task_quitting": True, "delta": 1}
 SMALL = Path(__file__).parents[1] / "configs" / "scenarios" / "train_small.yaml"
@@ -201,7 +201,7 @@ def test_the_label_cache_gives_the_same_run_without_labelling_again(trained, tmp
 def test_augmenting_fits_each_state_under_one_of_the_eight_symmetries(monkeypatch):
     """``fit_epoch`` with ``augment``'s symmetries feeds the actor each state turned by one of them (all eight
     drawn over an epoch), with its labels as they were; with eight identities it is the run without."""
-    from policies.symmetry import square_symmetries
+    from taskalloc.policies.symmetry import square_symmetries
 
     data = planner.label(("train_small", OVERRIDES, "exact", [3, 4, 5]))
     env = TaskAllocEnv("train_small", **OVERRIDES)

@@ -1,14 +1,14 @@
 """A learned round-0 planner's play rule, threshold by threshold, replanning and planning once
-(``evaluation.planner_play``)."""
+(``taskalloc.evaluation.planner_play``)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from evaluation import planner_play
-from evaluation.episodes import evaluate
-from policies import make_policy
+from taskalloc.evaluation import planner_play
+from taskalloc.evaluation.episodes import evaluate
+from taskalloc.policies import make_policy
 from taskalloc_env.config import resolve_config
 from taskalloc_env.errors import run_cli
 

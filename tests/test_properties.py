@@ -25,7 +25,7 @@ from helpers import (
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from policies import CBGAPolicy, RandomPolicy
+from taskalloc.policies import CBGAPolicy, RandomPolicy
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.cbba_table import outbids
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from helpers import agent, build, check_tables, run_episode, tables, task
 
-from policies import CBBAPolicy, CBGAPolicy, PassPolicy
+from taskalloc.policies import CBBAPolicy, CBGAPolicy, PassPolicy
 from taskalloc_env import TaskAllocConfig, TaskAllocEnv, generate
 from taskalloc_env.cbba_table import NONE
 from taskalloc_env.consensus import broadcast_round

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import torch as th
 
-from evaluation import compare, experiments
-from policies.learned import LearnedPolicy
-from policies.networks import masked_logits
+from taskalloc.evaluation import compare, experiments
+from taskalloc.policies.learned import LearnedPolicy
+from taskalloc.policies.networks import masked_logits
 from taskalloc_env import TaskAllocEnv
 
 ray = pytest.importorskip("ray")
@@ -29,7 +29,7 @@ def test_rllib_ppo_trains_and_its_checkpoint_is_a_learned_policy(tmp_path, local
     from ray.rllib.core.columns import Columns
     from ray.rllib.core.rl_module.rl_module import RLModule
 
-    from training import rllib_ppo
+    from taskalloc.training import rllib_ppo
 
     summary = rllib_ppo.main(["train", "--out-dir", str(tmp_path), "--iterations", "2", "--train-batch", "128",
                               "--minibatch", "64", "--epochs", "1", "--network", "pooling", "--hidden", "32",

@@ -1,5 +1,5 @@
-"""``policies.symmetry``: a mirror or quarter turn of an instance on a square floor turns its observations the way
-``square_symmetries`` says, and leaves the exact optimum's allocation and score as they were."""
+"""``taskalloc.policies.symmetry``: a mirror or quarter turn of an instance on a square floor turns its observations the
+way ``square_symmetries`` says, and leaves the exact optimum's allocation and score as they were."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from policies.local_plan import SOLVERS
-from policies.symmetry import is_square, square_symmetries
+from taskalloc.policies.local_plan import SOLVERS
+from taskalloc.policies.symmetry import is_square, square_symmetries
 from taskalloc_env import TaskAllocEnv
 
 CASES = [(swap, mirror_x, mirror_y) for swap in (False, True) for mirror_x in (False, True)

@@ -52,7 +52,7 @@ def test_a_lone_agent_sees_the_bound():
 @pytest.mark.parametrize("scenario", ["train_small", "default"])
 def test_team_features_stay_in_the_space_and_do_not_change_the_episode(scenario):
     """Every observation lies in the space; the allocation of a scripted episode is the same with and without."""
-    from policies import make_policy, rollout
+    from taskalloc.policies import make_policy, rollout
 
     for seed in range(3):
         allocations = []
@@ -70,7 +70,7 @@ def test_team_features_stay_in_the_space_and_do_not_change_the_episode(scenario)
 def test_a_model_trained_without_them_plays_the_same_with_them(name):
     """The team columns are dropped from the input of a checkpoint that never saw them (the way a round-0 planner
     trained with them hands over to such a bidder): its episodes are the same with and without the option."""
-    from policies import make_policy, rollout
+    from taskalloc.policies import make_policy, rollout
 
     for seed in range(3):
         allocations = []

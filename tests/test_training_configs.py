@@ -15,18 +15,18 @@ CONFIGS = sorted(Path(resources.folder("training")).glob("*.yaml"))
 def test_every_committed_training_config_loads_and_passes_its_checks(path, tmp_path):
     argv = ["--config", path.stem, "--out-dir", str(tmp_path / "run")]
     if path.stem.startswith("mappo_"):
-        from training import mappo
+        from taskalloc.training import mappo
 
         cfg = mappo.load_config(argv)
     elif path.stem.startswith(("distil_", "planner_")):
-        from training import distil, planner
-        from training.config import parse
+        from taskalloc.training import distil, planner
+        from taskalloc.training.config import parse
 
         kind = distil.DistilConfig if path.stem.startswith("distil_") else planner.PlannerConfig
-        cfg = parse(kind, argv, "python -m training", None)
+        cfg = parse(kind, argv, "python -m taskalloc.training", None)
         cfg.check()
     else:
-        from training import train
+        from taskalloc.training import train
 
         cfg = train.load_config(argv)
     assert cfg.name == path.stem

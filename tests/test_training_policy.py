@@ -12,14 +12,14 @@ import torch as th
 from helpers import assert_same_actions
 from sb3_contrib import MaskablePPO
 
-from policies import make_policy, rollout
-from policies.learned import LearnedPolicy
-from policies.networks import MASKED_LOGIT, masked_logits
-from policies.teams import MixedTeamPolicy
+from taskalloc.policies import make_policy, rollout
+from taskalloc.policies.learned import LearnedPolicy
+from taskalloc.policies.networks import MASKED_LOGIT, masked_logits
+from taskalloc.policies.teams import MixedTeamPolicy
+from taskalloc.training.bc import behaviour_cloning, collect_demonstrations
+from taskalloc.training.sb3_policy import TaskMaskablePolicy, actor_of, as_learned, save_checkpoint
+from taskalloc.training.vec_env import TaskAllocVecEnv, make_env_fns
 from taskalloc_env import TaskAllocEnv
-from training.bc import behaviour_cloning, collect_demonstrations
-from training.sb3_policy import TaskMaskablePolicy, actor_of, as_learned, save_checkpoint
-from training.vec_env import TaskAllocVecEnv, make_env_fns
 
 pytestmark = pytest.mark.slow
 

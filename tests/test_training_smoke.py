@@ -1,4 +1,4 @@
-"""``python -m training.train`` end to end on a few thousand steps: it learns, saves, reloads, and mixes teams."""
+"""``taskalloc train`` end to end on a few thousand steps: it learns, saves, reloads, and mixes teams."""
 
 from __future__ import annotations
 
@@ -12,11 +12,11 @@ import yaml
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("sb3_contrib")
 
-from evaluation.seeds import VALIDATION_SEED_START
-from policies import make_policy, rollout
-from policies.learned import LearnedPolicy
+from taskalloc.evaluation.seeds import VALIDATION_SEED_START
+from taskalloc.policies import make_policy, rollout
+from taskalloc.policies.learned import LearnedPolicy
+from taskalloc.training import train
 from taskalloc_env import ConfigError, TaskAllocEnv
-from training import train
 
 pytestmark = pytest.mark.slow
 

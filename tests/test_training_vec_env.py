@@ -14,8 +14,8 @@ pytest.importorskip("sb3_contrib")
 
 from sb3_contrib.common.maskable.utils import get_action_masks, is_masking_supported
 
+from taskalloc.training.vec_env import TaskAllocVecEnv, make_env_fns
 from taskalloc_env.env import InvalidActionError
-from training.vec_env import TaskAllocVecEnv, make_env_fns
 
 ENV = {"scenario": "train_small", "task_quitting": True, "delta": 1, "reward_scale": 100.0}
 
@@ -177,7 +177,7 @@ def test_sb3_algorithms_run_on_the_adapter_with_a_seed(algo):
     from sb3_contrib import MaskablePPO
     from stable_baselines3 import PPO
 
-    from training.sb3_policy import TaskMaskablePolicy, TaskPolicy
+    from taskalloc.training.sb3_policy import TaskMaskablePolicy, TaskPolicy
 
     algo_class, policy = (MaskablePPO, TaskMaskablePolicy) if algo == "maskable_ppo" else (PPO, TaskPolicy)
     venv = make(n_copies=2)

@@ -2,7 +2,7 @@
 
 Builds the wheel, installs it with the ``learned`` extra into a new venv, and from a temporary directory: makes the
 env with no arguments and with the named scenarios, runs CBGABI, loads ``learned:train_small``, and runs
-``python -m policies compare --episodes 2``.
+``taskalloc compare --episodes 2``.
 
 Torch is not installed a second time: the new venv sees the running environment's torch (pinned first by the README's
 set-up) and what torch needs, through a directory of links on its path, and nothing else of it. A second CPU torch is
@@ -30,7 +30,7 @@ pytestmark = pytest.mark.slow
 
 SCRIPT = """
 import pettingzoo, taskalloc_env
-from policies import make_policy, rollout
+from taskalloc.policies import make_policy, rollout
 env = pettingzoo.make("parallel", "taskalloc/TaskAlloc-v0")
 obs, infos = env.reset(seed=0)
 assert len(env.agents) == 10 and obs["uav_0"]["observation"].dtype.name == "float32"
@@ -90,7 +90,14 @@ def test_wheel_installs_and_runs_outside_the_checkout(tmp_path, env_dir):
     assert run([python, "-c", "import torch; print(torch.__version__)"], cwd=tmp_path).startswith(TORCH)
     run([python, "-m", "pip", "install", "-q", f"{wheel}[learned]"], cwd=tmp_path)
     outside = tmp_path / "elsewhere"
-    outside.mkdir()
+    (outside / "training").mkdir(parents=True)             # a user's own modules with our layers' folder names
+    for mine in ("evaluation.py", "policies.py", "training/__init__.py"):
+        (outside / mine).write_text(f"MINE = {mine!r}\n")
     assert "site-packages" in run([python, "-c", SCRIPT], cwd=outside)
-    table = run([python, "-m", "policies", "compare", "--episodes", "2", "--no-progress"], cwd=outside)
+    table = run([str(env_dir / "bin" / "taskalloc"), "compare", "--scenario", "train_small", "--episodes", "2",
+                 "--no-progress"], cwd=outside)
     assert "CBGABI" in table and "learned (train_small)" in table
+    theirs = run([python, "-c", "import evaluation, policies, training, taskalloc.policies as ours; "
+                  "print(evaluation.MINE, policies.MINE, training.MINE, ours.__file__)"], cwd=outside)
+    assert theirs.split()[:3] == ["evaluation.py", "policies.py", "training/__init__.py"], theirs
+    assert "site-packages" in theirs.split()[3]

@@ -17,9 +17,9 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.policies import ActorCriticPolicy
 
-from policies.base import stack_observations
-from policies.registry import make_policy
-from policies.teams import ScriptedTeammates, check_scripted_agents
+from taskalloc.policies.base import stack_observations
+from taskalloc.policies.registry import make_policy
+from taskalloc.policies.teams import ScriptedTeammates, check_scripted_agents
 from taskalloc_env.env import TaskAllocEnv
 
 

@@ -11,12 +11,12 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from evaluation.episodes import evaluate, summarise
-from policies.registry import make_policy
-from policies.teams import with_teammates
+from taskalloc.evaluation.episodes import evaluate, summarise
+from taskalloc.policies.registry import make_policy
+from taskalloc.policies.teams import with_teammates
+from taskalloc.training.sb3_policy import as_learned, save_checkpoint
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.observation import ObservationLayout
-from training.sb3_policy import as_learned, save_checkpoint
 
 EVAL_COLUMNS = ("timesteps", "wall_time", "score", "score_std", "valid_tasks", "rounds", "messages",
                 "baseline_score", "ratio")

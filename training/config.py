@@ -2,7 +2,7 @@
 
 Every field carries its help text (``opt``), so ``--help`` lists them all; values on the command line are read as
 YAML (``null``, ``true``, ``1e-4``, ``{k: v}``, ``[a, b]``). Type errors name the field and what is allowed. Used by
-``training.train`` (SB3) and ``training.mappo`` (our own PPO loop).
+``taskalloc.training.train`` (SB3) and ``taskalloc.training.mappo`` (our own PPO loop).
 """
 
 from __future__ import annotations

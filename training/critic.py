@@ -18,7 +18,7 @@ from __future__ import annotations
 import torch as th
 from torch import nn
 
-from policies.networks import mlp
+from taskalloc.policies.networks import mlp
 
 TASK_TOKEN = ("x", "y", "z", "window_start", "window_end", "required_agents", "bid_sum", "bid_max", "members",
               "complete", "round")

@@ -1,6 +1,6 @@
-"""Learning curves from the ``eval.csv`` files that ``python -m training.train`` writes.
+"""Learning curves from the ``eval.csv`` files that ``taskalloc train`` writes.
 
-    python -m training.curves --out docs/learning_curve.png \\
+    taskalloc curves --out docs/learning_curve.png \\
         "PPO from scratch=models/train_small/eval.csv" "BC + PPO=models/train_small_bc/eval.csv"
 
 Each curve is the greedy policy's mean score on the validation seeds (20000 …) against PPO steps (agent
@@ -28,7 +28,7 @@ def read_curve(path: Path) -> dict[str, list[float]]:
     except OSError as exc:
         raise ConfigError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from None
     if not rows or not {"timesteps", "score", "baseline_score"} <= set(rows[0]):
-        raise ConfigError(f"{str(path)!r} is not an eval.csv of python -m training.train (no evaluation rows)")
+        raise ConfigError(f"{str(path)!r} is not an eval.csv of taskalloc train (no evaluation rows)")
     return {key: [float(r[key]) for r in rows] for key in rows[0]}
 
 
@@ -61,7 +61,7 @@ def plot(curves: list[tuple[str, Path]], out: Path, skip_untrained: bool = True)
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m training.curves", description=__doc__,
+    parser = argparse.ArgumentParser(prog="taskalloc curves", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("curves", nargs="+", metavar="LABEL=EVAL_CSV", help="a curve: its label and an eval.csv")
     parser.add_argument("--out", type=Path, required=True, help="the PNG to write")

@@ -1,8 +1,8 @@
 """Distilling the optimum: how much of it a local observation can learn (DAgger from the privileged oracle).
 
-    python -m training.distil --config distil_small --seed 0 --out-dir runs/distil_small/seed0
+    taskalloc distil --config distil_small --seed 0 --out-dir runs/distil_small/seed0
 
-A measurement more than a training method. The oracle (``policies.oracle``) bids along the exact optimum and
+A measurement more than a training method. The oracle (``taskalloc.policies.oracle``) bids along the exact optimum and
 reaches it through the protocol; a decentralised actor sees only its own observation. This run fits the actor to
 the oracle's choices with DAgger (Ross, Gordon and Bagnell 2011, "A Reduction of Imitation Learning and Structured
 Prediction to No-Regret Online Learning"): iteration 0 plays the oracle, iteration k plays, at every step, the
@@ -16,7 +16,7 @@ After each iteration the run reports the agreement (the actor's greedy action is
 training states and on the oracle's states of the validation instances (all, those of the first round, before any
 message was exchanged, and those of later rounds), where it also reports CBGABI's rule for comparison, and the
 greedy actor's score on the validation instances against CBGABI and the optimum. The run writes ``model.json`` +
-``model.safetensors`` (the actor: ``learned:<out_dir>``, and a start for ``python -m training.mappo --init-from
+``model.safetensors`` (the actor: ``learned:<out_dir>``, and a start for ``taskalloc mappo --init-from
 <out_dir>/model.json``), ``distil.csv`` (one row per iteration), ``config.yaml`` and ``summary.yaml``.
 """
 
@@ -34,17 +34,25 @@ import torch as th
 import yaml
 from torch import nn
 
-from evaluation.episodes import evaluate
-from evaluation.seeds import DEMO_SEED_START, VALIDATION_SEED_START
-from policies import checkpoint, make_policy
-from policies.base import stack_observations
-from policies.learned import LearnedPolicy
-from policies.oracle import OraclePolicy
+from taskalloc.evaluation.episodes import evaluate
+from taskalloc.evaluation.seeds import DEMO_SEED_START, VALIDATION_SEED_START
+from taskalloc.policies import checkpoint, make_policy
+from taskalloc.policies.base import stack_observations
+from taskalloc.policies.learned import LearnedPolicy
+from taskalloc.policies.oracle import OraclePolicy
+from taskalloc.training.config import (
+    check_at_least,
+    check_protocol_options,
+    check_types,
+    opt,
+    parse,
+    plain,
+    prepare_out_dir,
+)
+from taskalloc.training.mappo import check_actor, make_actor
 from taskalloc_env.config import resolve_config
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import run_cli
-from training.config import check_at_least, check_protocol_options, check_types, opt, parse, plain, prepare_out_dir
-from training.mappo import check_actor, make_actor
 
 COLUMNS = ("iteration", "beta", "episodes", "samples", "loss", "train_agreement", "validation_agreement",
            "first_round_agreement", "later_rounds_agreement", "cbgabi_agreement", "score", "ratio_cbgabi",
@@ -165,7 +173,7 @@ def cbgabi_choices(env: TaskAllocEnv, data: Decisions) -> np.ndarray:
 
 
 def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
-    cfg = parse(DistilConfig, argv, "python -m training.distil", __doc__)
+    cfg = parse(DistilConfig, argv, "taskalloc distil", __doc__)
     cfg.out_dir = cfg.out_dir or f"runs/{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     cfg.check()
     out_dir = prepare_out_dir(cfg.out_dir, cfg.overwrite)
@@ -220,7 +228,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
 
     checkpoint.save(out_dir / "model", actor, layout.own_names, layout.task_names, cfg.env_overrides,
                     {"name": cfg.name, "algo": "distil", "seed": cfg.seed, "scenario": cfg.scenario})
-    summary = {"command": " ".join(["python -m training.distil", *(argv or sys.argv[1:])]),
+    summary = {"command": " ".join(["taskalloc distil", *(argv or sys.argv[1:])]),
                "seconds": round(time.perf_counter() - t0, 1), "validation_cbgabi": float(baseline.mean()),
                "validation_optimum": float(optimum.mean()),
                "validation_decisions": len(val_states.obs),

@@ -1,30 +1,32 @@
 """MAPPO: decentralised actors on their own observations, a centralised critic on ``env.state()``, one PPO loop.
 
-    python -m training.mappo --config mappo_small                    # attention actor on train_small
-    python -m training.mappo --config mappo_mixture --seed 1         # one model over sizes 4×8 … 10×20
-    python -m training.mappo --config mappo_small --out-dir models/mappo_small --overwrite true   # the committed one
+    taskalloc mappo --config mappo_small                    # attention actor on train_small
+    taskalloc mappo --config mappo_mixture --seed 1         # one model over sizes 4×8 … 10×20
+    taskalloc mappo --config mappo_small --out-dir models/mappo_small --overwrite true   # the committed one
 
 The loop reads top to bottom in the manner of CleanRL's ``ppo.py`` (Huang et al. 2022, "The 37 Implementation
 Details of Proximal Policy Optimization"): config, environments, networks, then rollouts, advantages and clipped
 updates. What makes it MAPPO (Yu et al. 2022, "The Surprising Effectiveness of PPO in Cooperative Multi-Agent
 Games"):
 
-* every agent acts from its own observation and mask with one shared actor (``policies.networks``: ``attention``
+* every agent acts from its own observation and mask with one shared actor (``taskalloc.policies.networks``:
+``attention``
   or ``pooling``), exactly as ``LearnedPolicy`` will at execution;
-* the critic (``training.critic.StateCritic``) sees ``env.state()`` and nothing else, and gives one value per env
+* the critic (``taskalloc.training.critic.StateCritic``) sees ``env.state()`` and nothing else, and gives one value per
+env
   copy and step; every agent of the copy receives the same team reward, so they share that value and advantage;
 * only real decisions train the actor: an agent whose mask allows a single action (it has passed in this round,
   or nothing is open to it) contributes nothing to the policy loss or the entropy (its ratio is 1 either way).
 
-A bidder for after a planned round 0 (``round_zero``, ours): a round-0 planner (``training.planner``) plays round 0
-of every training episode for every agent, as part of the environment's dynamics, and the actor learns the rounds
-after it, from the states the planner leaves (a bidder trained from its own round 0 never sees those). The team
-score gained in round 0 is the planner's, so it is no part of the actor's return. The checkpoint names the planner
-(meta ``round_zero``) and ``learned:<run>`` loads as the pair, as the evaluation plays it. The mirror,
-``later_rounds``: a fixed policy plays every round after round 0 and the actor learns round 0 alone, its return the
-team score the whole episode ends with (meta ``then``). Started from a round-0 planner's checkpoint (``init_from``,
-its pass logit set to 0 so that the policy's arg-max is the planner's rule), this fine-tunes the planner on the team
-score itself instead of on the solver's labels.
+A bidder for after a planned round 0 (``round_zero``, ours): a round-0 planner (``taskalloc.training.planner``) plays
+round 0 of every training episode for every agent, as part of the environment's dynamics, and the actor learns the
+rounds after it, from the states the planner leaves (a bidder trained from its own round 0 never sees those). The team
+score gained in round 0 is the planner's, so it is no part of the actor's return. The checkpoint names the planner (meta
+``round_zero``) and ``learned:<run>`` loads as the pair, as the evaluation plays it. The mirror, ``later_rounds``: a
+fixed policy plays every round after round 0 and the actor learns round 0 alone, its return the team score the whole
+episode ends with (meta ``then``). Started from a round-0 planner's checkpoint (``init_from``, its pass logit set to 0
+so that the policy's arg-max is the planner's rule), this fine-tunes the planner on the team score itself instead of on
+the solver's labels.
 
 Sizes: ``mixture`` lists scenarios (each with its overrides, number of env copies and ``from_steps``, the agent
 steps after which it joins: a curriculum). Every rollout collects ``n_steps`` steps from every copy of every active
@@ -55,19 +57,16 @@ import yaml
 from safetensors.torch import load_file, save_file
 from torch import nn
 
-from evaluation.episodes import evaluate, summarise
-from evaluation.seeds import TEST_SEEDS, VALIDATION_SEED_START
-from policies import checkpoint, make_policy
-from policies.base import Policy, stack_observations
-from policies.handover import with_partner
-from policies.learned import LearnedPolicy, resolve
-from policies.networks import AttentionActor, PoolingActor, count_parameters
-from policies.registry import planner_pair
-from policies.round_zero import PLANNER
-from taskalloc_env.config import resolve_config
-from taskalloc_env.env import TaskAllocEnv
-from taskalloc_env.errors import ConfigError, run_cli
-from training.config import (
+from taskalloc.evaluation.episodes import evaluate, summarise
+from taskalloc.evaluation.seeds import TEST_SEEDS, VALIDATION_SEED_START
+from taskalloc.policies import checkpoint, make_policy
+from taskalloc.policies.base import Policy, stack_observations
+from taskalloc.policies.handover import with_partner
+from taskalloc.policies.learned import LearnedPolicy, resolve
+from taskalloc.policies.networks import AttentionActor, PoolingActor, count_parameters
+from taskalloc.policies.registry import planner_pair
+from taskalloc.policies.round_zero import PLANNER
+from taskalloc.training.config import (
     check_at_least,
     check_protocol_options,
     check_types,
@@ -76,7 +75,10 @@ from training.config import (
     plain,
     prepare_out_dir,
 )
-from training.critic import StateCritic
+from taskalloc.training.critic import StateCritic
+from taskalloc_env.config import resolve_config
+from taskalloc_env.env import TaskAllocEnv
+from taskalloc_env.errors import ConfigError, run_cli
 
 ACTORS = ("attention", "pooling")
 CRITIC_FILE = "critic.safetensors"      # next to model.json: the critic, for a run that continues this one
@@ -168,7 +170,7 @@ class MappoConfig:
 
 
 def load_config(argv: Sequence[str] | None = None) -> MappoConfig:
-    cfg = parse(MappoConfig, argv, "python -m training.mappo", __doc__)
+    cfg = parse(MappoConfig, argv, "taskalloc mappo", __doc__)
     cfg.out_dir = cfg.out_dir or f"runs/{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     cfg.check()
     return cfg
@@ -267,8 +269,8 @@ class Group:
 
 # -- networks ---------------------------------------------------------------------------------------------------------
 class ActorSpec(Protocol):
-    """The config fields an actor is built from (``MappoConfig``, ``training.distil.DistilConfig``,
-    ``training.planner.PlannerConfig``)."""
+    """The config fields an actor is built from (``MappoConfig``, ``taskalloc.training.distil.DistilConfig``,
+    ``taskalloc.training.planner.PlannerConfig``)."""
 
     actor: str
     hidden: int
@@ -496,7 +498,7 @@ def load_partner(cfg: MappoConfig) -> Partner | None:
 
 
 def save_actor(stem: Path, actor: nn.Module, group: Group, cfg: MappoConfig, meta: Mapping[str, Any]) -> Path:
-    """The actor as a checkpoint (``policies.checkpoint``): what ``learned:<path>`` loads."""
+    """The actor as a checkpoint (``taskalloc.policies.checkpoint``): what ``learned:<path>`` loads."""
     return checkpoint.save(stem, actor, group.layout.own_names, group.layout.task_names, cfg.env_overrides, meta)
 
 
@@ -508,7 +510,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     th.set_num_threads(cfg.torch_threads)
     th.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
-    summary: dict[str, Any] = {"command": " ".join(["python -m training.mappo", *(argv or sys.argv[1:])]),
+    summary: dict[str, Any] = {"command": " ".join(["taskalloc mappo", *(argv or sys.argv[1:])]),
                                "cpu_count": os.cpu_count(), "load_average_at_start": round(os.getloadavg()[0], 2)}
     t_start, cpu_start = time.perf_counter(), time.process_time()
 

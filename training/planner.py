@@ -1,19 +1,20 @@
-"""Learning the round-0 plan: supervised, from solver labels (ours; the local plan of ``policies.local_plan`` learned).
+"""Learning the round-0 plan: supervised, from solver labels (ours; the local plan of ``taskalloc.policies.local_plan``
+learned).
 
-    python -m training.planner --config planner_default --seed 0 --out-dir runs/planner_default/seed0
+    taskalloc planner --config planner_default --seed 0 --out-dir runs/planner_default/seed0
 
 Before any message (round 0, thesis Alg 5) an agent knows its own start, speed and equipment and the tasks, not
-where its teammates are. ``policies.local_plan`` plans its first bundle by solving teams drawn around its own start;
-this run learns that plan instead. It draws training instances (seeds 100000 + 100000 · seed + k), solves each
-(``solver``: the exact optimum, or the group search ``policies.local_search`` with ``LNS_ITERATIONS`` per start at
-sizes ``exact`` cannot reach), plays round 0 with every agent bidding along its path of that allocation
-(``policies.oracle.bid_along``) and keeps every round-0 state in which the agent may bid: its observation, the
+where its teammates are. ``taskalloc.policies.local_plan`` plans its first bundle by solving teams drawn around its own
+start; this run learns that plan instead. It draws training instances (seeds 100000 + 100000 · seed + k), solves each
+(``solver``: the exact optimum, or the group search ``taskalloc.policies.local_search`` with ``LNS_ITERATIONS`` per
+start at sizes ``exact`` cannot reach), plays round 0 with every agent bidding along its path of that allocation
+(``taskalloc.policies.oracle.bid_along``) and keeps every round-0 state in which the agent may bid: its observation, the
 tasks it may bid on and which of them are on its path. The actor's bid logits are fitted as per-task log-odds with
-binary cross-entropy over the allowed tasks, so the network estimates, from what the agent sees, the probability
-that a task is on its path, the share the local plan estimates by sampling. Play (``policies.round_zero``): bid
-the most likely allowed task while that probability is ≥ ``threshold`` (re-estimated at every step, or planned once
-at the agent's first round-0 state: ``replan``), then hand over to ``then`` (by default the committed MAPPO bidder)
-from round 1 on.
+binary cross-entropy over the allowed tasks, so the network estimates, from what the agent sees, the probability that a
+task is on its path, the share the local plan estimates by sampling. Play (``taskalloc.policies.round_zero``): bid the
+most likely allowed task while that probability is ≥ ``threshold`` (re-estimated at every step, or planned once at the
+agent's first round-0 state: ``replan``), then hand over to ``then`` (by default the committed MAPPO bidder) from round
+1 on.
 
 The run writes ``model.json`` + ``model.safetensors`` (``learned:<out_dir>`` plays the planner, then ``then``),
 ``planner.csv`` (one row per epoch: training and validation loss), ``config.yaml`` and ``summary.yaml`` (the
@@ -39,22 +40,30 @@ import torch as th
 import yaml
 from torch import nn
 
-from evaluation.episodes import evaluate
-from evaluation.pool import parallel_map
-from evaluation.seeds import DEMO_SEED_START, VALIDATION_SEED_START
-from policies import checkpoint, make_policy
-from policies.base import stack_observations
-from policies.local_plan import SOLVERS
-from policies.oracle import bid_along
-from policies.round_zero import PLANNER, bid_log_odds, is_threshold
-from policies.symmetry import is_square, square_symmetries
+from taskalloc.evaluation.episodes import evaluate
+from taskalloc.evaluation.pool import parallel_map
+from taskalloc.evaluation.seeds import DEMO_SEED_START, VALIDATION_SEED_START
+from taskalloc.policies import checkpoint, make_policy
+from taskalloc.policies.base import stack_observations
+from taskalloc.policies.local_plan import SOLVERS
+from taskalloc.policies.oracle import bid_along
+from taskalloc.policies.round_zero import PLANNER, bid_log_odds, is_threshold
+from taskalloc.policies.symmetry import is_square, square_symmetries
+from taskalloc.training.config import (
+    check_at_least,
+    check_protocol_options,
+    check_types,
+    opt,
+    parse,
+    plain,
+    prepare_out_dir,
+)
+from taskalloc.training.mappo import check_actor, make_actor
 from taskalloc_env.allocation import on_paths
 from taskalloc_env.config import resolve_config, to_mapping
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
 from taskalloc_env.observation import ObservationLayout
-from training.config import check_at_least, check_protocol_options, check_types, opt, parse, plain, prepare_out_dir
-from training.mappo import check_actor, make_actor
 
 COLUMNS = ("epoch", "loss", "validation_loss", "wall_time")
 MAX_GRAD_NORM = 1.0
@@ -193,7 +202,8 @@ def tensors(data: Plans) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
 def fit_epoch(actor: nn.Module, optimizer: th.optim.Optimizer, data: tuple[th.Tensor, ...], batch_size: int,
               rng: np.random.Generator, symmetries: tuple[th.Tensor, ...] | None = None) -> float:
     """One pass over ``data`` in random minibatches, each state turned by a random one of ``symmetries``
-    (permutations, signs, shifts: ``policies.symmetry.square_symmetries``) when given; the mean loss per allowed
+    (permutations, signs, shifts: ``taskalloc.policies.symmetry.square_symmetries``) when given; the mean loss per
+    allowed
     task. The labels stay: a turn moves the tasks, not their indices."""
     obs, allowed, on_path = data
     total, weight = 0.0, 0.0
@@ -216,7 +226,7 @@ def fit_epoch(actor: nn.Module, optimizer: th.optim.Optimizer, data: tuple[th.Te
 
 
 def symmetry_tensors(layout: ObservationLayout) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
-    """``policies.symmetry.square_symmetries`` of ``layout`` as tensors ``fit_epoch`` turns states with."""
+    """``taskalloc.policies.symmetry.square_symmetries`` of ``layout`` as tensors ``fit_epoch`` turns states with."""
     permutations, signs, shifts = square_symmetries(layout.own_names, layout.task_names, layout.n_tasks)
     return th.as_tensor(permutations), th.as_tensor(signs, dtype=th.float32), th.as_tensor(shifts, dtype=th.float32)
 
@@ -228,7 +238,7 @@ def cpu_seconds() -> float:
 
 
 def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
-    cfg = parse(PlannerConfig, argv, "python -m training.planner", __doc__)
+    cfg = parse(PlannerConfig, argv, "taskalloc planner", __doc__)
     cfg.out_dir = cfg.out_dir or f"runs/{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     cfg.check()
     try:
@@ -278,7 +288,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     scores = {label: float(np.mean([a.score for a in evaluate(policy, env_kwargs, val_seeds)]))
               for label, policy in (("planner_then", make_policy(f"learned:{out_dir}")), ("then", then),
                                     ("cbgabi", make_policy("cbgabi")))}
-    summary = {"command": " ".join(["python -m training.planner", *(argv if argv is not None else sys.argv[1:])]),
+    summary = {"command": " ".join(["taskalloc planner", *(argv if argv is not None else sys.argv[1:])]),
                "wall_seconds": round(time.perf_counter() - t0, 1), "cpu_seconds": round(cpu_seconds(), 1),
                "label_seconds": round(label_seconds, 1), "load_average_at_start": load, "cpu_count": os.cpu_count(),
                "states": len(train.obs), "validation_loss": val_loss,

@@ -1,5 +1,5 @@
-"""The RLlib RLModule of ``training.rllib_ppo``, in a module of its own so that its class pickles by an importable
-name (RLlib pickles the module class into checkpoints and ships it to remote EnvRunners; a class defined in
+"""The RLlib RLModule of ``taskalloc.training.rllib_ppo``, in a module of its own so that its class pickles by an
+importable name (RLlib pickles the module class into checkpoints and ships it to remote EnvRunners; a class defined in
 ``__main__`` would not load there).
 """
 
@@ -13,7 +13,7 @@ from ray.rllib.core.rl_module.apis import ValueFunctionAPI
 from ray.rllib.core.rl_module.torch import TorchRLModule
 from torch import nn
 
-from policies.networks import AttentionActor, PoolingActor, PoolingEncoder, split_tasks
+from taskalloc.policies.networks import AttentionActor, PoolingActor, PoolingEncoder, split_tasks
 
 NETWORKS = {"attention": AttentionActor, "pooling": PoolingActor}
 

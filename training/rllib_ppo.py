@@ -1,18 +1,18 @@
 """RLlib PPO (new API stack) on the same environment: one shared RLModule with the project's actor, masked logits.
 
     pip install "taskalloc[ray]"
-    python -m training.rllib_ppo train --out-dir runs/rllib --iterations 20                # a local Ray instance
-    RAY_ADDRESS=<head>:6379 python -m training.rllib_ppo train --env-runners 8 --out-dir runs/rllib   # a cluster
-    python -m training.rllib_ppo export runs/rllib/rllib runs/rllib/model     # an RLlib checkpoint → model.json
+    taskalloc rllib train --out-dir runs/rllib --iterations 20                # a local Ray instance
+    RAY_ADDRESS=<head>:6379 taskalloc rllib train --env-runners 8 --out-dir runs/rllib   # a cluster
+    taskalloc rllib export runs/rllib/rllib runs/rllib/model     # an RLlib checkpoint → model.json
 
 Parameter sharing: every agent maps to the one module ``shared`` (RLlib's ``pettingzoo_parameter_sharing`` example).
-The module (``TaskAllocRLModule``) holds one of the project's actor networks (``policies.networks``: ``attention``
-or ``pooling``), which masks its own logits, as RLlib's ``ActionMaskingTorchRLModule`` does; its critic is a pooling
-encoder of the agent's own observation (PPO with parameter sharing; the centralised critic on ``env.state()`` is in
-``training.mappo``). Because the actor is a project network, a run ends by writing it in the project's checkpoint
-format (``model.json`` + ``model.safetensors``, ``policies.checkpoint``): ``learned:<out_dir>`` in ``compare``, the
-experiment runner and ``evaluation.heldout``. The RLlib checkpoint (``<out_dir>/rllib``) is saved too;
-``export`` turns any RLlib checkpoint of this module (from a cluster run, say) into a project checkpoint.
+The module (``TaskAllocRLModule``) holds one of the project's actor networks (``taskalloc.policies.networks``:
+``attention`` or ``pooling``), which masks its own logits, as RLlib's ``ActionMaskingTorchRLModule`` does; its critic is
+a pooling encoder of the agent's own observation (PPO with parameter sharing; the centralised critic on ``env.state()``
+is in ``taskalloc.training.mappo``). Because the actor is a project network, a run ends by writing it in the project's
+checkpoint format (``model.json`` + ``model.safetensors``, ``taskalloc.policies.checkpoint``): ``learned:<out_dir>`` in
+``compare``, the experiment runner and ``taskalloc.evaluation.heldout``. The RLlib checkpoint (``<out_dir>/rllib``) is
+saved too; ``export`` turns any RLlib checkpoint of this module (from a cluster run, say) into a project checkpoint.
 
 Ray starts locally (``address="local"``) unless ``RAY_ADDRESS`` names a cluster; the package must be installed on
 every node of the cluster (``pip install taskalloc[ray]``), and ``--env-runners`` then samples on the nodes. (Ray's
@@ -36,17 +36,17 @@ from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
 from ray.rllib.core.rl_module.rl_module import RLModule, RLModuleSpec
 from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
 
-from evaluation.episodes import evaluate, summarise
-from evaluation.seeds import VALIDATION_SEED_START
-from policies import checkpoint, make_policy
-from policies.learned import LearnedPolicy
+from taskalloc.evaluation.episodes import evaluate, summarise
+from taskalloc.evaluation.seeds import VALIDATION_SEED_START
+from taskalloc.policies import checkpoint, make_policy
+from taskalloc.policies.learned import LearnedPolicy
+from taskalloc.training.config import plain, prepare_out_dir
+from taskalloc.training.rllib_module import NETWORKS, TaskAllocRLModule
 from taskalloc_env.config import PROTOCOL_FIELDS, resolve_config
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
 from taskalloc_env.taskalloc_v0 import parallel_env
 from taskalloc_env.wrappers.rllib import RLlibObservations
-from training.config import plain, prepare_out_dir
-from training.rllib_module import NETWORKS, TaskAllocRLModule
 
 ENV_NAME = "taskalloc"
 MODULE_ID = "shared"
@@ -58,7 +58,7 @@ def make_env(env_config: Mapping[str, Any]) -> ParallelPettingZooEnv:
 
 def env_config(scenario: str, overrides: Mapping[str, Any], env_overrides: Mapping[str, Any],
                max_cycles: int) -> dict[str, Any]:
-    """Keyword arguments of ``parallel_env``; rewards in units of c̄ · N, as in ``training.mappo``."""
+    """Keyword arguments of ``parallel_env``; rewards in units of c̄ · N, as in ``taskalloc.training.mappo``."""
     cfg = resolve_config(scenario, **overrides)
     return {"scenario": scenario, **overrides, **env_overrides, "max_cycles": max_cycles,
             "reward_scale": float(cfg.reward) * cfg.n_agents}
@@ -136,7 +136,7 @@ def train(args: argparse.Namespace) -> dict[str, Any]:
     validation = summarise(evaluate(policy, eval_env, seeds))
     baseline = summarise(evaluate(make_policy("cbgabi"), eval_env, seeds))
     steps = history[-1]["agent_steps"] if history else 0
-    summary = {"command": "python -m training.rllib_ppo " + " ".join(args.argv), "ray_address":
+    summary = {"command": "taskalloc rllib " + " ".join(args.argv), "ray_address":
                os.environ.get("RAY_ADDRESS", "local"), "iterations": history, "train_seconds": round(seconds, 1),
                "agent_steps_per_second": round(steps / seconds, 1) if seconds else None,
                "validation": validation, "cbgabi_validation": baseline}
@@ -175,7 +175,7 @@ def _mapping(text: str) -> dict[str, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> Any:
-    parser = argparse.ArgumentParser(prog="python -m training.rllib_ppo", description=__doc__,
+    parser = argparse.ArgumentParser(prog="taskalloc rllib", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("train", help="train with RLlib PPO, then write the RLlib and the project checkpoint")

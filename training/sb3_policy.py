@@ -1,11 +1,12 @@
-"""The actor networks of ``policies.networks`` inside SB3 / sb3-contrib actor-critic policies, for PPO training.
+"""The actor networks of ``taskalloc.policies.networks`` inside SB3 / sb3-contrib actor-critic policies, for PPO
+training.
 
 SB3's features extractor only concatenates ``observation`` and ``action_mask``; the body (SB3's ``mlp_extractor``)
-holds the actor (``pi``, one of ``policies.networks.NETWORKS``) and a critic of the same shape, and outputs the
-masked logits, so the policy's ``action_net`` is the identity. The mask is applied inside the network (invalid
+holds the actor (``pi``, one of ``taskalloc.policies.networks.NETWORKS``) and a critic of the same shape, and outputs
+the masked logits, so the policy's ``action_net`` is the identity. The mask is applied inside the network (invalid
 actions get ``MASKED_LOGIT``), so plain PPO never samples an invalid action; MaskablePPO masks again, which changes
-nothing. Actor and critic have separate encoders. A trained policy's actor is ``actor_of(policy)``, which is what
-a checkpoint stores (``policies.checkpoint``).
+nothing. Actor and critic have separate encoders. A trained policy's actor is ``actor_of(policy)``, which is what a
+checkpoint stores (``taskalloc.policies.checkpoint``).
 """
 
 from __future__ import annotations
@@ -21,9 +22,9 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
-from policies import checkpoint
-from policies.learned import LearnedPolicy, resolve
-from policies.networks import MlpActor, PoolingActor, PoolingEncoder, mlp, split_tasks
+from taskalloc.policies import checkpoint
+from taskalloc.policies.learned import LearnedPolicy, resolve
+from taskalloc.policies.networks import MlpActor, PoolingActor, PoolingEncoder, mlp, split_tasks
 from taskalloc_env.config import PROTOCOL_FIELDS
 from taskalloc_env.observation import TASK_FEATURES, ObservationLayout
 
@@ -135,7 +136,7 @@ def as_learned(policy: ActorCriticPolicy, layout: ObservationLayout, env_kwargs:
 
 def save_checkpoint(stem: Path, policy: ActorCriticPolicy, layout: ObservationLayout, env_kwargs: Mapping[str, Any],
                     meta: Mapping[str, Any]) -> Path:
-    """Write the actor as a checkpoint (``policies.checkpoint``); returns the JSON path."""
+    """Write the actor as a checkpoint (``taskalloc.policies.checkpoint``); returns the JSON path."""
     return checkpoint.save(stem, actor_of(policy), layout.own_names, layout.task_names,
                            protocol_overrides(env_kwargs), meta)
 

@@ -1,14 +1,14 @@
 """Train a shared bidding policy: optional behaviour cloning from CBGABI, then (Maskable)PPO.
 
-    python -m training.train --config train_small
-    python -m training.train --config train_small --seed 1 --total-steps 200000 --n-envs 16 \\
+    taskalloc train --config train_small
+    taskalloc train --config train_small --seed 1 --total-steps 200000 --n-envs 16 \\
         --scripted-agents "{uav_0: cbga}"
 
 Every field of :class:`TrainConfig` can be set in the YAML file and overridden on the command line
 (``--field-name value``; values are read as YAML, so ``null``, ``true``, ``1e-4`` and ``{k: v}`` work).
 The run writes to ``out_dir`` (default ``runs/<name>``): ``config.yaml`` (the resolved config), checkpoints
-(``policies.checkpoint``: JSON + safetensors) ``bc`` after behaviour cloning and ``model`` at the end, ``eval.csv``
-(periodic evaluation on validation seeds against CBGABI) and ``summary.yaml`` (timings, throughput, final
+(``taskalloc.policies.checkpoint``: JSON + safetensors) ``bc`` after behaviour cloning and ``model`` at the end,
+``eval.csv`` (periodic evaluation on validation seeds against CBGABI) and ``summary.yaml`` (timings, throughput, final
 evaluation); TensorBoard logs, SB3 checkpoints and the best model by validation score (``best``) go to ``log_dir``
 (default ``runs/<name>``).
 
@@ -34,19 +34,16 @@ try:
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
     from stable_baselines3.common.utils import set_random_seed
 except ModuleNotFoundError as missing:              # name the extra, not just the module
-    raise ModuleNotFoundError(f"training.train needs {missing.name}: pip install 'taskalloc[train]'") from missing
+    raise ModuleNotFoundError(f"taskalloc train needs {missing.name}: pip install 'taskalloc[train]'") from missing
 
-from evaluation.episodes import evaluate, summarise
-from evaluation.seeds import DEMO_SEED_START, TEST_SEEDS, VALIDATION_SEED_START
-from policies.networks import count_parameters
-from policies.teams import scripted_env_overrides, with_teammates
-from taskalloc_env.env import TaskAllocEnv
-from taskalloc_env.errors import ConfigError, run_cli
-from taskalloc_env.observation import ObservationLayout
-from training.bc import behaviour_cloning, collect_demonstrations
-from training.callbacks import EpisodeMetricsCallback, PeriodicEvalCallback
-from training.config import check_at_least, check_types, opt, parse, plain, prepare_out_dir
-from training.sb3_policy import (
+from taskalloc.evaluation.episodes import evaluate, summarise
+from taskalloc.evaluation.seeds import DEMO_SEED_START, TEST_SEEDS, VALIDATION_SEED_START
+from taskalloc.policies.networks import count_parameters
+from taskalloc.policies.teams import scripted_env_overrides, with_teammates
+from taskalloc.training.bc import behaviour_cloning, collect_demonstrations
+from taskalloc.training.callbacks import EpisodeMetricsCallback, PeriodicEvalCallback
+from taskalloc.training.config import check_at_least, check_types, opt, parse, plain, prepare_out_dir
+from taskalloc.training.sb3_policy import (
     BODIES,
     TaskMaskablePolicy,
     TaskPolicy,
@@ -54,7 +51,10 @@ from training.sb3_policy import (
     load_actor_weights,
     save_checkpoint,
 )
-from training.vec_env import TaskAllocVecEnv, make_env_fns
+from taskalloc.training.vec_env import TaskAllocVecEnv, make_env_fns
+from taskalloc_env.env import TaskAllocEnv
+from taskalloc_env.errors import ConfigError, run_cli
+from taskalloc_env.observation import ObservationLayout
 
 ALGOS = {"maskable_ppo": (MaskablePPO, TaskMaskablePolicy), "ppo": (PPO, TaskPolicy)}
 
@@ -142,7 +142,7 @@ class TrainConfig:
 
 def load_config(argv: list[str] | None = None) -> TrainConfig:
     """``--config NAME_OR_FILE`` then ``--field value`` overrides (values parsed as YAML)."""
-    cfg = parse(TrainConfig, argv, "python -m training.train", __doc__)
+    cfg = parse(TrainConfig, argv, "taskalloc train", __doc__)
     cfg.out_dir = cfg.out_dir or f"runs/{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     cfg.log_dir = cfg.log_dir or str(Path(cfg.out_dir) / "logs")
     cfg.check()
@@ -187,7 +187,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     (out_dir / "config.yaml").write_text(yaml.safe_dump(dataclasses.asdict(cfg), sort_keys=False))
     th.set_num_threads(cfg.torch_threads)
     set_random_seed(cfg.seed)
-    summary: dict[str, Any] = {"command": " ".join(["python -m training.train", *(argv or sys.argv[1:])]),
+    summary: dict[str, Any] = {"command": " ".join(["taskalloc train", *(argv or sys.argv[1:])]),
                                "cpu_count": os.cpu_count(), "load_average_at_start": round(os.getloadavg()[0], 2)}
     t_start, cpu_start = time.perf_counter(), time.process_time()
 

@@ -34,8 +34,8 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 from stable_baselines3.common.vec_env.base_vec_env import CloudpickleWrapper, VecEnv, VecEnvIndices
 
-from policies.base import stack_observations
-from policies.teams import ScriptedTeammates, check_scripted_agents
+from taskalloc.policies.base import stack_observations
+from taskalloc.policies.teams import ScriptedTeammates, check_scripted_agents
 
 EnvFn = Callable[[], ParallelEnv]
 MASK_METHOD = "action_masks"

@@ -3,8 +3,8 @@
 import torch
 from sb3_contrib import MaskablePPO
 
-from training.sb3_policy import TaskMaskablePolicy
-from training.vec_env import TaskAllocVecEnv, make_env_fns
+from taskalloc.training.sb3_policy import TaskMaskablePolicy
+from taskalloc.training.vec_env import TaskAllocVecEnv, make_env_fns
 
 
 def main(steps: int = 512) -> dict[str, int]:

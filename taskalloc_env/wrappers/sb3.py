@@ -7,7 +7,7 @@ seed + c) and ``has_attr`` / ``env_method("action_masks")`` (MaskablePPO reads t
 
     model = MaskablePPO("MultiInputPolicy", sb3_vec_env(taskalloc_v0.parallel_env(), copies=2), seed=0)
 
-The project's own adapter for training, ``training.vec_env.TaskAllocVecEnv``, needs no SuperSuit and also sets
+The project's own adapter for training, ``taskalloc.training.vec_env.TaskAllocVecEnv``, needs no SuperSuit and also sets
 ``TimeLimit.truncated``.
 """
 
