@@ -7,9 +7,10 @@ CBBA's convergence and conflict-freedom rest on diminishing marginal gains (DMG,
 thesis eq. (2.5)). The per-leg cost of thesis (3.9) (``distance_cost="leg"``: γ × the detour an insertion adds) is
 not DMG, and neither are re-timed gains (``marginal_gain="rescore"``, (3.11)): inserting a task can raise the value
 of another, and greedy bids can cycle. Warped bids (``bid_warping``: the shared bid is min(c_ij, the agent's earlier
-bundle bids), so shared bids follow DMG — Johnson §4.3: "as long as external bids follow DMG") restore
-convergence. Each row runs a policy on the thesis's test scenario (§3.3.2; 10 agents, 20 tasks) at one L_j and
-reports the share of seeds that converge before the round bound, the rounds they took, and the mean score.
+bundle bids), so shared bids follow DMG; our construction, after Johnson §4.3's allusion to unpublished work
+that allows such costs "as long as external bids follow DMG") restore convergence. Each row runs a policy on the
+thesis's test scenario (§3.3.2; 10 agents, 20 tasks) at one L_j and reports the share of seeds that converge
+before the round bound, the rounds they took, and the mean score.
 """
 
 from __future__ import annotations

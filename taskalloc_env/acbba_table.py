@@ -11,7 +11,8 @@ extraction; the readings are the only ones consistent with the remarks, docs/dec
 
 =================  ==============================================================================================
 ``UPDATE``         update & rebroadcast (action 1, line 826): copy (z_kj, y_kj, t_kj)
-``OUTBID``         update† & rebroadcast (rows 1, 2, 17, 18: the receiver loses its bid): copy (z_kj, y_kj, t_kj);
+``OUTBID``         update† & rebroadcast (rows 1 and 17, lines 833, 849; also the tie rows 2 and 18, printed as a
+                   plain update, by the remarks 875, 891): the receiver loses its bid; copy (z_kj, y_kj, t_kj);
                    with ``outbid_time="bump"`` (the † reading) a time not later than the receiver's losing time
                    becomes that time + ε ("the winning bid has a later time than the losing bid", 875)
 ``UPDATE_TIME``    update time & rebroadcast (action 5, line 871; printed "update‡" in rows 3 and 19): the

@@ -19,11 +19,12 @@ generator), so an episode with faults is exactly reproducible from its seed.
 
 The graph g_ik (thesis §2.2.4, §3.2.1): fully connected, or range-limited between start positions.
 
-The thesis draws a range circle per agent (thesis §4.3, Figs 4.2–4.5) but never writes the edge rule, so it is our
-choice: ``edge_rule="dist"`` links agents at distance ≤ r; ``"circles_overlap"`` links them when their range
-circles overlap (distance ≤ 2r). ``comm_range=None`` is global broadcast. Messages are forwarded whole, so bids
-travel multi-hop; D (the diameter, the largest over connected components) bounds how many rounds that takes (a bid
-needs up to D rounds to cross the network, thesis §4.3).
+The thesis's edge rule is overlapping range circles (thesis §4.3: "any overlapping circles show the available
+communication channels", Figs 4.2–4.5) but it does not state the circles' radius, so that is our choice:
+``edge_rule="dist"`` (radius r/2) links agents at distance ≤ r; ``"circles_overlap"`` (radius r) at distance ≤ 2r.
+``comm_range=None`` is global broadcast. Messages are forwarded whole, so bids travel multi-hop; D (the diameter,
+the largest over connected components) bounds how many rounds that takes (a bid needs up to D rounds to cross the
+network, thesis §4.3).
 """
 
 from __future__ import annotations
