@@ -15,7 +15,7 @@ import dataclasses
 import functools
 import itertools
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -308,7 +308,26 @@ def _has_cycle(prereqs: np.ndarray) -> bool:
     return seen < len(prereqs)
 
 
+Generator = Callable[[TaskAllocConfig, np.random.Generator], Scenario]
+GENERATORS: dict[str, Generator] = {}
+
+
+def register_generator(name: str, generator: Generator) -> None:
+    """Make ``generator`` (config, rng) → Scenario the one the config field ``generator = name`` selects (ours: the
+    seam for new instance families). Re-registering a name replaces it."""
+    if not (isinstance(name, str) and name.isidentifier()):
+        raise ValueError(f"a generator name must be an identifier, got {name!r}")
+    if not callable(generator):
+        raise TypeError(f"generator {name!r} must be callable (config, rng) -> Scenario, got {generator!r}")
+    GENERATORS[name] = generator
+
+
 def generate(cfg: TaskAllocConfig, rng: np.random.Generator) -> Scenario:
+    """Draw a random instance of ``cfg`` with the generator it names (``cfg.generator``, ``uniform`` by default)."""
+    return GENERATORS[cfg.generator](cfg, rng)     # the config refused an unregistered name
+
+
+def uniform(cfg: TaskAllocConfig, rng: np.random.Generator) -> Scenario:
     """Draw a random instance of ``cfg`` (the test scenario of thesis §3.3.2).
 
     Agents start uniformly on the floor (z = 0), tasks uniformly in the W × W × H volume, start times
@@ -357,3 +376,6 @@ def generate(cfg: TaskAllocConfig, rng: np.random.Generator) -> Scenario:
         task_agents=agents, task_equipment=task_eq, task_prereqs=prereqs, time_discount=cfg.time_discount,
         distance_discount=cfg.distance_discount, equipment_names=names, arena=cfg.arena,
     )
+
+
+register_generator("uniform", uniform)
