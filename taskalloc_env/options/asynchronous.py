@@ -40,7 +40,7 @@ ASYNC_GROUP = group("asynchronous", (
     Field('acbba_row28_guard', 'bool', default=True,
           meaning='row 28 likewise',
           source='Johnson remark l. 899–901'),
-    Field('acbba_equal_bids', 'choice', choices=('leave', 'trust_later'), default='trust_later',
+    Field('acbba_equal_bids', 'choice', choices=('trust_later', 'leave'), default='trust_later',
           meaning=('an equal bid of another agent (row 9, and m \\| n with equal bids): adopt it if its time is later'
                    ' \\| `leave` (the cell and the default)'),
           source='choice, after Johnson\'s "trust the later timestamp" (l. 879, 897)'),

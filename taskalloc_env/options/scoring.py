@@ -5,7 +5,7 @@ from __future__ import annotations
 from taskalloc_env.fields import Field, group
 
 SCORING_GROUP = group("scoring", (
-    Field('distance_cost', 'choice', choices=('leg', 'from_start'), default='leg',
+    Field('distance_cost', 'choice', choices=('from_start', 'leg'), default='leg',
           meaning=('`leg` (γ × the distance flown into the task; a path costs γ × its length) \\| `from_start` (γ × '
                    "the straight distance from the agent's start, the same on every path) — see "
                    '[decisions](decisions.md)'),
