@@ -14,19 +14,17 @@ the flat ``TaskAllocConfig`` from them. The limits below are ours (docs/decision
 
 Regenerate the tables of docs/configuration.md from the facts::
 
-    python -m taskalloc_env.fields --docs docs/configuration.md
+    python -m taskalloc_env.options --docs docs/configuration.md
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import difflib
 import math
 import re
 import reprlib
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 from taskalloc_env.errors import ConfigError
@@ -109,7 +107,8 @@ class Field:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
                 fail(name, value, "a probability in [0, 1]")
         else:
-            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+            ok = ok and (isinstance(value, int) or math.isfinite(value))      # math.isfinite(2**2000) overflows
             if ok:
                 ok = (value > self.low if self.strict else value >= self.low) and abs(value) <= self.high
             if not ok:
@@ -167,7 +166,7 @@ def _yaml_text(value: Any, code: bool = False) -> str:
     if isinstance(value, tuple):
         return "[" + ", ".join(_yaml_text(v) for v in value) + "]"
     if isinstance(value, float):
-        return f"{value:g}" if value != int(value) else f"{value:.1f}"
+        return f"{value:g}"
     return f"`{value}`" if code else str(value)
 
 
@@ -199,25 +198,6 @@ def render_docs(text: str, groups: dict[str, Sequence[Field]]) -> str:
     def replace(match: re.Match[str]) -> str:
         name = match.group("group")
         if name not in groups:
-            raise ValueError(f"docs name an unknown field group {name!r}; groups: {', '.join(groups)}")
+            raise ConfigError(f"docs name an unknown field group {name!r}; groups: {', '.join(groups)}")
         return match.group(1) + table(groups[name]) + match.group(4)
     return _BLOCK.sub(replace, text)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m taskalloc_env.fields --docs FILE``: rewrite the field tables of FILE from the facts."""
-    from taskalloc_env.config import FIELD_GROUPS
-
-    parser = argparse.ArgumentParser(description=main.__doc__)
-    parser.add_argument("--docs", type=Path, required=True, help="markdown file with <!-- fields:GROUP --> blocks")
-    args = parser.parse_args(argv)
-    text = args.docs.read_text(encoding="utf-8")
-    new = render_docs(text, FIELD_GROUPS)
-    if new != text:
-        args.docs.write_text(new, encoding="utf-8")
-    print(f"{args.docs}: {'rewritten' if new != text else 'already up to date'}")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
