@@ -85,9 +85,10 @@ def test_bad_input_is_refused_naming_the_field(case):
 
 # -- resource estimates ------------------------------------------------------------------------------------------
 @pytest.mark.parametrize(("n", "m", "bundle", "width", "asynchronous", "term"), [
-    (10**9, 20, None, None, False, "local tables of N·M·L"),
+    (10**9, 20, None, None, False, "N·N arrays"),
     (10, 10**9, None, 4, False, "path gains of N·M·(P+1)"),
-    (10**6, 10**4, 3, 8, False, "local tables of N·M·L"),
+    (10**4, 10**5, 3, 8, False, "local tables of N·M·L"),
+    (10, 10**6, 3, 4, False, "M·M arrays"),
     (2000, 1000, 3, 4, True, "per-entry times of N·N·M"),
 ])
 def test_huge_sizes_are_refused_naming_the_dominant_term(n, m, bundle, width, asynchronous, term):
