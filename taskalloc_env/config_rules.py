@@ -16,6 +16,7 @@ from typing import Any
 
 from taskalloc_env import stamps
 from taskalloc_env.fields import MAX_COUNT, MAX_HORIZON, Field, fail
+from taskalloc_env.generators import GENERATORS
 from taskalloc_env.options.generation import PrerequisiteChains, TaskMix
 
 
@@ -129,11 +130,9 @@ def _check_asynchronous(cfg: Any) -> None:
 
 
 def _check_generator(cfg: Any) -> None:
-    from taskalloc_env.scenario import GENERATORS  # the registry lives with the generators (it imports config)
-
     if cfg.generator not in GENERATORS:
         fail("generator", cfg.generator, f"a registered generator: {' | '.join(GENERATORS)} "
-             "(scenario.register_generator adds one)")
+             "(register_generator adds one)")
 
 
 # -- the nested records, from YAML mappings -----------------------------------------------------------------------

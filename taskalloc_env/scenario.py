@@ -15,7 +15,7 @@ import dataclasses
 import functools
 import itertools
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -23,6 +23,7 @@ import numpy as np
 from taskalloc_env.config import MAX_MAGNITUDE, TaskAllocConfig, type_counts
 from taskalloc_env.errors import ConfigError
 from taskalloc_env.fields import bounded_repr
+from taskalloc_env.generators import GENERATORS, register_generator
 
 NO_DEADLINE = np.inf
 # our size limits of a scenario built from entities (docs/decisions.md "config limits"): its (M, M) prerequisite
@@ -323,23 +324,9 @@ def _has_cycle(prereqs: np.ndarray) -> bool:
     return seen < len(prereqs)
 
 
-Generator = Callable[[TaskAllocConfig, np.random.Generator], Scenario]
-GENERATORS: dict[str, Generator] = {}
-
-
-def register_generator(name: str, generator: Generator) -> None:
-    """Make ``generator`` (config, rng) → Scenario the one the config field ``generator = name`` selects (ours: the
-    seam for new instance families). Re-registering a name replaces it."""
-    if not (isinstance(name, str) and name.isidentifier()):
-        raise ValueError(f"a generator name must be an identifier, got {name!r}")
-    if not callable(generator):
-        raise TypeError(f"generator {name!r} must be callable (config, rng) -> Scenario, got {generator!r}")
-    GENERATORS[name] = generator
-
-
 def generate(cfg: TaskAllocConfig, rng: np.random.Generator) -> Scenario:
     """Draw a random instance of ``cfg`` with the generator it names (``cfg.generator``, ``uniform`` by default)."""
-    return GENERATORS[cfg.generator](cfg, rng)     # the config refused an unregistered name
+    return GENERATORS[cfg.generator](cfg, rng)     # the config refused an unregistered name (config_rules)
 
 
 def uniform(cfg: TaskAllocConfig, rng: np.random.Generator) -> Scenario:

@@ -85,7 +85,8 @@ def test_bad_input_is_refused_naming_the_field(case):
 
 # -- resource estimates ------------------------------------------------------------------------------------------
 @pytest.mark.parametrize(("n", "m", "bundle", "width", "asynchronous", "term"), [
-    (10**9, 20, None, None, False, "N·N arrays"),
+    (10**9, 20, None, None, False, "local tables of N·M·L"),
+    (10**6, 1, None, 1, False, "N·N arrays"),
     (10, 10**9, None, 4, False, "path gains of N·M·(P+1)"),
     (10**4, 10**5, 3, 8, False, "local tables of N·M·L"),
     (10, 10**6, 3, 4, False, "M·M arrays"),

@@ -91,7 +91,7 @@ GENERATION_GROUP = group("generation", (
                    'false` leaves follow-ups without a deadline'),
           source='thesis §3.1.3, (3.6); E3.15'),
     Field('generator', 'name', default='uniform',
-          meaning=('the scenario generator, by its name in `scenario.GENERATORS` (`register_generator(name, fn)` adds '
-                   'one): `uniform` draws positions, start times and L_j uniformly (below)'),
+          meaning=('the scenario generator, by its name in `generators.GENERATORS` (`register_generator(name, fn)` '
+                   'adds one): `uniform` draws positions, start times and L_j uniformly (below)'),
           source='`uniform`: thesis §3.3.2 (the distribution is ours); the registry is ours'),
 ))
