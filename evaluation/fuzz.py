@@ -43,10 +43,16 @@ from taskalloc.evaluation.episodes import default_jobs
 from taskalloc.evaluation.pool import parallel_map
 from taskalloc.policies import make_policy
 from taskalloc_env import TaskAllocEnv
+from taskalloc_env.config import CHOICES
 from taskalloc_env.errors import run_cli
 
 CHECKS = ("spaces", "return", "converged", "agreement", "conflict-free", "valid groups", "determinism")
 POLICIES = ("random", "cbga", "cbga+tb", "cbga+tq", "cbgabi")
+
+
+def options(field: str, *without: str) -> list[str]:
+    """The values the fuzzer draws for a named option: its choices (the config's facts) but ``without``."""
+    return [value for value in CHOICES[field] if value not in without]
 
 
 def draw_equipment(rng: np.random.Generator, n_tasks: int) -> dict[str, Any]:
@@ -78,23 +84,20 @@ def draw_config(rng: np.random.Generator, extra: np.random.Generator) -> dict[st
             length = int(rng.integers(2, min(3, n_tasks) + 1))
             kw["prerequisites"] = {"chains": int(rng.integers(1, max(1, n_tasks // length) + 1)), "length": length,
                                    "followup_window": bool(rng.integers(2))}
-            kw["prereq_mode"] = str(rng.choice(["all_have_bid", "all_complete", "any_has_bid"]))
-            kw["prereq_timing"] = str(rng.choice(["conservative", "earliest", "none"]))
+            kw["prereq_mode"] = str(rng.choice(options("prereq_mode")))
+            kw["prereq_timing"] = str(rng.choice(options("prereq_timing")))
     if rng.random() < 0.3:
         kw["comm_range"] = float(rng.uniform(0.5, 4.0))
         kw["require_known_capacity"] = bool(rng.integers(2))
-    for field, values in (("marginal_gain", ["rescore", "frozen"]), ("reward_split", ["per_agent", "total"]),
-                          ("release_order", ["bundle", "path"]), ("cbba_table", ["canonical", "thesis"]),
-                          ("consensus", ["sync", "every_step"]), ("reset_on", ["additions", "any_change"]),
-                          ("quit_block", ["until_joined", "none"]), ("conflict_policy", ["first_L_paid", "none_paid"]),
-                          ("distance_cost", ["from_start", "leg"])):
-        kw[field] = str(rng.choice(values))
+    for field in ("marginal_gain", "reward_split", "release_order", "cbba_table", "consensus", "reset_on",
+                  "quit_block", "conflict_policy", "distance_cost"):
+        kw[field] = str(rng.choice(options(field, "acbba")))            # acbba: drawn from ``extra`` below
     if rng.random() < 0.3:
         kw["max_bundle"] = int(rng.integers(1, 4))
     if extra.random() < 0.3:                            # pop-up tasks (releases), in every consensus mode
         kw["popup_tasks"] = int(extra.integers(1, n_tasks + 1))
         kw["popup_period"] = int(extra.choice([1, 5, 20]))
-        kw["popup_arrivals"] = str(extra.choice(["periodic", "poisson"]))
+        kw["popup_arrivals"] = str(extra.choice(options("popup_arrivals")))
         kw["mission_time_per_tick"] = float(extra.choice([0.0, 0.5]))
     if extra.random() < 0.35:                           # the asynchronous consensus (async_protocol)
         kw["consensus"] = "acbba"
@@ -102,18 +105,16 @@ def draw_config(rng: np.random.Generator, extra: np.random.Generator) -> dict[st
         kw["message_ticks"] = [low, low + float(extra.choice([0.0, 0.3]))]
         kw["build_ticks"] = [int(extra.integers(0, 2)), int(extra.integers(2, 4))]
         kw["separation_time"] = int(extra.choice([5, 25]))
-        kw["termination"] = str(extra.choice(["auto", "global", "local"]))
-        for field, values in (("acbba_row11", ["update", "trust_later"]), ("acbba_row15", ["leave_bump", "leave"]),
-                              ("acbba_time_refresh", ["epsilon", "now"]), ("acbba_ties", ["lowest_id", "higher_id"]),
-                              ("acbba_equal_bids", ["trust_later", "leave"]),
-                              ("acbba_outbid_time", ["bump", "sender"])):
-            kw[field] = str(extra.choice(values))
+        kw["termination"] = str(extra.choice(options("termination")))
+        for field in ("acbba_row11", "acbba_row15", "acbba_time_refresh", "acbba_ties", "acbba_equal_bids",
+                      "acbba_outbid_time"):
+            kw[field] = str(extra.choice(options(field, "empty")))  # row 15 "empty" is not the thesis's (livelock)
         kw["acbba_row20_guard"] = kw["acbba_row28_guard"] = bool(extra.random() < 0.8)
     if rng.random() < 0.4:                              # an imperfect network (network.Network)
         kw["message_loss"] = float(rng.choice([0.0, 0.1, 0.3]))
         kw["max_delay"] = int(rng.integers(0, 3))
         if rng.random() < 0.3:
-            kw["loss_model"] = "gilbert_elliott"
+            kw["loss_model"] = "gilbert_elliott"        # the bursty model (faults.LOSS_MODELS)
         if rng.random() < 0.3:
             kw["dropouts"] = 1
             kw["dropout_rounds"] = [1, 6]

@@ -29,7 +29,6 @@ network, thesis §4.3).
 
 from __future__ import annotations
 
-import abc
 import dataclasses
 
 import numpy as np
@@ -38,6 +37,9 @@ from scipy.sparse.csgraph import connected_components, shortest_path
 
 from taskalloc_env.config import TaskAllocConfig
 from taskalloc_env.errors import ConfigError
+from taskalloc_env.faults import LOSS_MODELS, GilbertElliott, IndependentLoss, LossModel, NoLoss
+
+__all__ = ["GilbertElliott", "IndependentLoss", "LossModel", "NoLoss"]   # the loss models live in faults
 
 
 class CommGraph:
@@ -109,45 +111,6 @@ class Deliveries:
         first = np.r_[0, np.flatnonzero(np.diff(self.receiver)) + 1]
         rank = np.arange(len(self)) - np.repeat(first, np.diff(np.r_[first, len(self)]))
         return [np.flatnonzero(rank == p) for p in range(int(rank.max()) + 1)]
-
-
-class LossModel(abc.ABC):
-    """Which of a round's messages (sender → receiver pairs) are lost."""
-
-    @abc.abstractmethod
-    def lost(self, sender: np.ndarray, receiver: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """A boolean mask over the messages."""
-
-
-class NoLoss(LossModel):
-    def lost(self, sender: np.ndarray, receiver: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        return np.zeros(len(sender), dtype=bool)
-
-
-class IndependentLoss(LossModel):
-    """Each message is lost with probability ``p``, independently of every other."""
-
-    def __init__(self, p: float) -> None:
-        self.p = p
-
-    def lost(self, sender: np.ndarray, receiver: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        return rng.random(len(sender)) < self.p
-
-
-class GilbertElliott(LossModel):
-    """Bursty loss: every link is a two-state Markov channel, stepped once per round it carries a message."""
-
-    def __init__(self, n_agents: int, loss_good: float, loss_bad: float, enter_bad: float, leave_bad: float) -> None:
-        self.bad = np.zeros((n_agents, n_agents), dtype=bool)
-        self.loss_good, self.loss_bad = loss_good, loss_bad
-        self.enter_bad, self.leave_bad = enter_bad, leave_bad
-
-    def lost(self, sender: np.ndarray, receiver: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        was_bad = self.bad[sender, receiver]
-        flip = rng.random(len(sender)) < np.where(was_bad, self.leave_bad, self.enter_bad)
-        bad = was_bad ^ flip
-        self.bad[sender, receiver] = bad
-        return rng.random(len(sender)) < np.where(bad, self.loss_bad, self.loss_good)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -234,13 +197,7 @@ class Network:
 
 def make_network(graph: CommGraph, cfg: TaskAllocConfig, rng: np.random.Generator) -> Network:
     """The ``Network`` the config names (``message_loss``, ``loss_model``, ``burst_*``, ``max_delay``)."""
-    if cfg.loss_model == "gilbert_elliott":
-        loss: LossModel = GilbertElliott(graph.n_agents, cfg.message_loss, cfg.burst_loss, cfg.burst_enter,
-                                         cfg.burst_leave)
-    elif cfg.message_loss > 0:
-        loss = IndependentLoss(cfg.message_loss)
-    else:
-        loss = NoLoss()
+    loss = LOSS_MODELS[cfg.loss_model].from_config(cfg, graph.n_agents)
     return Network(graph, loss, cfg.max_delay, rng)
 
 

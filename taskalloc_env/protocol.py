@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 import os
 
 import numpy as np
@@ -55,7 +56,9 @@ def memory_estimate(n_agents: int, n_tasks: int, max_bundle: int | None = None, 
     entry (``async_consensus.Times``), N·N·M values. A round copies the tables about seven times (the snapshot sent,
     the merge's receiver blocks, the before/after tables of the convergence test). A batched gain computation holds
     ten (N, P + 1, M) arrays for paths of up to P = max_bundle tasks; observations are N·22·M values, built three
-    times.
+    times. Twelve N·N arrays: the graph's distances (three coordinates) and hops, the timestamps s_i[k], the relayed
+    stamps and the copies a round makes of them, the observation's silence. Four M·M arrays: the prerequisites and
+    the task-to-task distances.
     """
     return sum(_memory_terms(n_agents, n_tasks, max_bundle, group_width, asynchronous).values())
 
@@ -68,6 +71,8 @@ def _memory_terms(n_agents: int, n_tasks: int, max_bundle: int | None, group_wid
     w = min(n, int(group_width or n))
     tables = ({"per-entry times of N·N·M values (asynchronous)": 8 * 7 * n * n * m} if asynchronous else {})
     return {"local tables of N·M·L member slots": 8 * 7 * 2 * n * m * w, **tables,
+            "N·N arrays (graph distances and hops, timestamps s_i[k] and their copies)": 8 * 12 * n * n,
+            "M·M arrays (prerequisites, task-to-task distances)": 8 * 4 * m * m,
             "path gains of N·M·(P+1) values (P = max_bundle)": 8 * 10 * n * m * (p + 1),
             "observations of N·22·M values": 8 * 70 * n * m}
 
@@ -87,6 +92,9 @@ def available_memory() -> int:
 def check_memory(n_agents: int, n_tasks: int, max_bundle: int | None, limit_gb: float | None,
                  group_width: int | None = None, asynchronous: bool = False) -> None:
     """Refuse a size whose estimate exceeds ``limit_gb`` (default: the memory available now), before allocating."""
+    if limit_gb is not None and (isinstance(limit_gb, bool) or not isinstance(limit_gb, (int, float))
+                                 or not 0 < limit_gb < math.inf):
+        raise ConfigError(f"memory_limit_gb: got {str(limit_gb)[:40]}; allowed: a finite number > 0, or None")
     terms = _memory_terms(n_agents, n_tasks, max_bundle, group_width, asynchronous)
     need, largest = sum(terms.values()), max(terms, key=terms.__getitem__)
     limit = available_memory() if limit_gb is None else limit_gb * 2**30

@@ -21,8 +21,15 @@ from typing import Any
 import numpy as np
 
 from taskalloc_env.config import MAX_MAGNITUDE, TaskAllocConfig, type_counts
+from taskalloc_env.errors import ConfigError
+from taskalloc_env.fields import bounded_repr
+from taskalloc_env.generators import GENERATORS, register_generator
 
 NO_DEADLINE = np.inf
+# our size limits of a scenario built from entities (docs/decisions.md "config limits"): its (M, M) prerequisite
+# matrix stays below 100 MB, and the per-record checks below take seconds, not minutes
+MAX_AGENTS_BUILT = 100_000
+MAX_TASKS_BUILT = 10_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,6 +81,11 @@ class Scenario:
 
     def __post_init__(self) -> None:
         n, m = len(self.agent_pos), len(self.task_pos)
+        if not (len(self.arena) == 3 and all(_is_number(v) and 0 < v <= MAX_MAGNITUDE for v in self.arena)):
+            raise ConfigError(f"scenario arena {bounded_repr(self.arena)} must be three sizes in "
+                              f"(0, {MAX_MAGNITUDE:g}]")
+        if not np.issubdtype(np.asarray(self.task_agents).dtype, np.integer):
+            raise ConfigError(f"scenario task_agents {bounded_repr(self.task_agents)} must be integers (L_j)")
         e = len(self.equipment_names)
         checks = {
             "agent_pos": (self.agent_pos.shape, (n, 3)),
@@ -183,7 +195,12 @@ class Scenario:
     def from_entities(cls, agents: Sequence[Agent], tasks: Sequence[Task], *, time_discount: float = 0.8,
                       distance_discount: float = 0.8, arena: tuple[float, float, float] | None = None,
                       equipment_names: Sequence[str] | None = None) -> Scenario:
-        """Build a fixed scenario from explicit agents and tasks (ids are list positions)."""
+        """Build a fixed scenario from explicit agents and tasks (ids are list positions); at most
+        ``MAX_AGENTS_BUILT`` agents and ``MAX_TASKS_BUILT`` tasks (the (M, M) prerequisite matrix, checked first)."""
+        if len(agents) > MAX_AGENTS_BUILT or len(tasks) > MAX_TASKS_BUILT:
+            raise ConfigError(f"a scenario built from entities holds at most {MAX_AGENTS_BUILT} agents and "
+                              f"{MAX_TASKS_BUILT} tasks (got {len(agents)} and {len(tasks)}; our size limit, "
+                              "docs/decisions.md \"config limits\")")
         if equipment_names is None:
             seen: list[str] = []
             for item in [e for a in agents for e in a.equipment] + [e for t in tasks for e in t.equipment]:
@@ -242,7 +259,6 @@ def scenario_config(scenario: Scenario, base: str = "default", **overrides: Any)
     Fields that generate instances cannot apply to a fixed scenario; overriding one raises ``ConfigError``.
     """
     from taskalloc_env.config import GENERATION_FIELDS, resolve_config
-    from taskalloc_env.errors import ConfigError
 
     levels = tuple(sorted({int(v) for v in scenario.task_agents}))
     counts = {"n_agents": scenario.n_agents, "n_tasks": scenario.n_tasks,
@@ -309,6 +325,11 @@ def _has_cycle(prereqs: np.ndarray) -> bool:
 
 
 def generate(cfg: TaskAllocConfig, rng: np.random.Generator) -> Scenario:
+    """Draw a random instance of ``cfg`` with the generator it names (``cfg.generator``, ``uniform`` by default)."""
+    return GENERATORS[cfg.generator](cfg, rng)     # the config refused an unregistered name (config_rules)
+
+
+def uniform(cfg: TaskAllocConfig, rng: np.random.Generator) -> Scenario:
     """Draw a random instance of ``cfg`` (the test scenario of thesis §3.3.2).
 
     Agents start uniformly on the floor (z = 0), tasks uniformly in the W × W × H volume, start times
@@ -357,3 +378,6 @@ def generate(cfg: TaskAllocConfig, rng: np.random.Generator) -> Scenario:
         task_agents=agents, task_equipment=task_eq, task_prereqs=prereqs, time_discount=cfg.time_discount,
         distance_discount=cfg.distance_discount, equipment_names=names, arena=cfg.arena,
     )
+
+
+register_generator("uniform", uniform)

@@ -86,8 +86,10 @@ def test_bad_input_is_refused_naming_the_field(case):
 # -- resource estimates ------------------------------------------------------------------------------------------
 @pytest.mark.parametrize(("n", "m", "bundle", "width", "asynchronous", "term"), [
     (10**9, 20, None, None, False, "local tables of N·M·L"),
+    (10**6, 1, None, 1, False, "N·N arrays"),
     (10, 10**9, None, 4, False, "path gains of N·M·(P+1)"),
-    (10**6, 10**4, 3, 8, False, "local tables of N·M·L"),
+    (10**4, 10**5, 3, 8, False, "local tables of N·M·L"),
+    (10, 10**6, 3, 4, False, "M·M arrays"),
     (2000, 1000, 3, 4, True, "per-entry times of N·N·M"),
 ])
 def test_huge_sizes_are_refused_naming_the_dominant_term(n, m, bundle, width, asynchronous, term):
@@ -106,8 +108,11 @@ def test_the_sparse_tables_admit_what_dense_ones_could_not():
         check_memory(2000, 1000, 3, 16.0, 4, asynchronous=True)
 
 
-def test_a_billion_agents_are_refused_before_allocating():
-    with pytest.raises(ConfigError, match=r"1000000000 agents × 20 tasks need about .* GiB"):
+def test_a_million_agents_are_refused_before_allocating():
+    """The memory estimate refuses a size at the count limit; a billion agents are past the limit itself."""
+    with pytest.raises(ConfigError, match=r"1000000 agents × 20 tasks need about .* GiB"):
+        TaskAllocEnv(n_agents=10**6)
+    with pytest.raises(ConfigError, match=r"'n_agents': got 1000000000; allowed: an integer >= 1 and <= 1e\+06"):
         TaskAllocEnv(n_agents=10**9)
 
 
@@ -117,7 +122,7 @@ YAML_FILES: dict[str, tuple[bytes | None, tuple[str, ...]]] = {
     "non-UTF-8": (b"n_agents: 4\nname: \"\xff\xfe\"\n", ("is not UTF-8 text", "byte 19")),
     "folder": (None, ("is a folder, not a YAML file",)),
     "deep nesting": (b"a: " + b"[" * 1000 + b"]" * 1000 + b"\n", ("nests too deeply",)),
-    "unknown key": (b"n_agents: 4\nspeeed: 2\n", ("unknown config field(s) ['speeed']",)),
+    "unknown key": (b"n_agents: 4\nspeeed: 2\n", ("unknown config field 'speeed' (did you mean 'speed'?)",)),
     "not a mapping": (b"- 1\n- 2\n", ("must hold a mapping of config fields", "list")),
 }
 
@@ -253,7 +258,8 @@ BAD_EXPERIMENTS = {
                            ("sweep values", "non-empty list", "[]")),
     "sweep not a mapping": ("name: x\nseries: [cbga]\nsweep: 5\n", ("sweep is", "got 5")),
     "series without solver": ("name: x\nseries: [{label: a}]\n", ("required key is missing", "'solver'")),
-    "bad override": ("name: x\nseries: [cbga]\noverrides: {speeed: 1}\n", ("unknown config field(s) ['speeed']",)),
+    "bad override": ("name: x\nseries: [cbga]\noverrides: {speeed: 1}\n",
+                     ("unknown config field 'speeed' (did you mean 'speed'?)",)),
     "bad episodes": ("name: x\nseries: [cbga]\nepisodes: many\n", ("episodes", "'many'", "integer >= 1")),
 }
 
