@@ -90,7 +90,7 @@ def test_there_are_three_guides():
 
 @pytest.mark.parametrize("guide", GUIDES, ids=lambda g: g.stem)
 def test_the_guides_python_runs_and_prints_what_it_shows(guide, folder):
-    assert run_guide(guide, folder, commands=False) >= 2
+    assert run_guide(guide, folder, commands=False) >= 1
 
 
 @pytest.mark.slow

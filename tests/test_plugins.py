@@ -41,6 +41,10 @@ USER_MODULE = textwrap.dedent('''
         return LastBid().act(observations)
 
 
+    class NamedBid(LastBid):
+        name = "last bid"
+
+
     class Quitter(LastBid):
         env_overrides = {"task_quitting": True}
 
@@ -86,6 +90,7 @@ def test_a_class_by_import_path_is_built_started_and_plays(user_module):
     assert score > 0                                                    # it bid: passing only scores 0
     assert _score(make_policy(f"{user_module}:last_bid")) == score      # a function of the observations
     assert _score(make_policy(f"{user_module}:INSTANCE")) == score      # an object with act, as is
+    assert make_policy(f"{user_module}:NamedBid").name == "last bid"    # a wrapped object keeps its own name
 
 
 def test_policy_subclasses_are_used_as_they_are_and_keep_their_name(user_module):
