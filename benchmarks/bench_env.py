@@ -1,4 +1,4 @@
-"""Speed benchmarks (issue 13) in one run: CBBA-Python ratios, env throughput, consensus scaling, peak memory.
+"""Speed benchmarks in one run: CBBA-Python ratios, env throughput, consensus scaling, peak memory.
 
     python -m benchmarks.bench_env --reference ../shared/anchors/CBBA-Python   # everything (about 5 CPU-minutes)
     python -m benchmarks.bench_env --quick                                     # up to 20 × 50, well under a minute

@@ -5,7 +5,8 @@
 Rows: random, CBBA (only where every L_j = 1), CBGA, CBGA+TQ, CBGA+TB, CBGABI, the centralised greedy SGAMA
 (thesis §3.3.3, Alg 7; no rounds or messages), the centralised group search LNS (``taskalloc.policies.local_search``,
 ours: a lower bound on the optimum, how much there is to take) and, for every committed checkpoint
-``models/<name>/model.json`` whose observation layout fits the scenario, the learned policy. Seed s is the same instance
+``models/<name>/model.json`` whose observation layout fits the scenario, the learned policy; ``--policy`` adds rows
+(a policy name, or your own policy by import path ``mypkg.mymodule:MyPolicy``). Seed s is the same instance
 for every row (paired design, thesis §5.3.1). The table gives mean ± sd of the score (``scoring.team_score``), valid
 tasks, consensus rounds and messages received (``msgs / agent`` = messages / N_n, the thesis's per-agent communication
 steps), episodes that hit the round bound (kept, counted), and the paired comparison with CBGA (mean difference, paired
@@ -73,6 +74,19 @@ def usable_learned(source: str, cfg: TaskAllocConfig) -> tuple[str | None, str]:
     return solver, ""
 
 
+def chosen_policy(name: str, cfg: TaskAllocConfig) -> str:
+    """A ``--policy`` row: a policy name or a user's import path (``mypkg.mymodule:MyPolicy``) that loads and starts on
+    ``cfg``; else a ``ConfigError`` naming it (the user asked for this row, so it is not skipped)."""
+    try:
+        policy = policy_for(name)
+        env = TaskAllocEnv(cfg, **policy.env_overrides)
+        env.reset(seed=0)
+        policy.start(env, 0)
+    except ValueError as exc:
+        raise ConfigError(f"--policy: {exc}") from None
+    return name
+
+
 def display_name(solver: str) -> str:
     if solver.startswith("learned:"):
         source = solver.split(":", 1)[1]
@@ -109,8 +123,10 @@ def summary(rows: Sequence[dict[str, Any]], order: Sequence[str]) -> tuple[str, 
 
 
 def compare(scenario: str, episodes: int, overrides: dict[str, Any], jobs: int = 1, out: Path | None = None,
-            learned: Sequence[str] | None = None, progress: bool = False, backend: str = "local") -> str:
-    """Run the comparison; returns the report text (also written to ``out`` when given)."""
+            learned: Sequence[str] | None = None, progress: bool = False, backend: str = "local",
+            policies: Sequence[str] = ()) -> str:
+    """Run the comparison; returns the report text (also written to ``out`` when given). ``policies`` adds rows:
+    policy names or import paths (``chosen_policy``)."""
     cfg = resolve_config(scenario, **overrides)
     notes, solvers = [], []
     for solver in BASELINES:
@@ -128,7 +144,12 @@ def compare(scenario: str, episodes: int, overrides: dict[str, Any], jobs: int =
             solvers.append(solver)
         else:
             notes.append(why + ".")
-    names = {s: display_name(s) for s in solvers}
+    solvers += [chosen_policy(name, cfg) for name in policies]
+    labels = [display_name(s) for s in solvers]
+    twice = sorted({label for label in labels if labels.count(label) > 1})
+    if twice:
+        raise ConfigError(f"--policy: a row would appear twice ({', '.join(twice)}); give each policy once")
+    names = dict(zip(solvers, labels))
     runs = [Episode(s, cfg, seed, (("policy", names[s]),)) for s in solvers for seed in range(episodes)]
     rows = run_episodes(runs, jobs=jobs, progress=progress, desc="compare", backend=backend)
     table, records = summary(rows, [names[s] for s in solvers])
@@ -183,6 +204,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--learned", action="append", default=None, metavar="NAME_OR_PATH",
                         help="a learned policy to include: a committed model's name or a checkpoint path "
                              "(repeatable; default: every committed model in models/)")
+    parser.add_argument("--policy", dest="policies", action="append", default=[], metavar="NAME_OR_PATH",
+                        help="add a row: a policy name (cbgabi:delta=3, learned:NAME) or your own policy by import "
+                             "path, mypkg.mymodule:MyPolicy (a class, an object with act, or a function of the "
+                             "observations; repeatable)")
     parser.add_argument("--no-learned", action="store_true", help="leave learned policies out")
     parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True,
                         help="show a progress bar on stderr (default: yes)")
@@ -199,7 +224,7 @@ def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     learned = [] if args.no_learned else args.learned
     text = compare(args.scenario, args.episodes, dict(args.overrides), args.jobs, args.out, learned, args.progress,
-                   args.backend)
+                   args.backend, args.policies)
     print(text, end="")
     if args.out is not None:
         print(f"written: {args.out}/compare.md, compare.csv, episodes.csv, compare.png")

@@ -64,6 +64,9 @@ def make_policy(name: str, **kwargs) -> Policy:
     policy its checkpoint names, ``taskalloc.policies.round_zero``)."""
     if name.lower().startswith("learned:"):
         return load_learned(name.split(":", 1)[1], **kwargs)
+    if ":" in name and name.split(":", 1)[0].lower() not in FACTORIES:      # a user's policy: mypkg.mymodule:MyPolicy
+        from taskalloc.policies.plugins import load_plugin
+        return load_plugin(name, **kwargs)
     key, params = parse_name(name)
     if key not in FACTORIES:
         raise ValueError(f"unknown policy {name!r}; known: {', '.join(POLICY_NAMES)}")

@@ -33,7 +33,7 @@ class Counters:
     data_items: int = 0
     bids: int = 0
     quits: int = 0
-    # quits other agents saw (issue 10): the quit's release reached another agent's table, i.e. a merge dropped the
+    # quits other agents saw: the quit's release reached another agent's table, i.e. a merge dropped the
     # quitter from that task's group in the table of an agent that listed it, before the quitter bid on it again
     quits_seen: int = 0
     invalid_actions: int = 0    # actions outside the mask turned into passes (invalid_action="noop")

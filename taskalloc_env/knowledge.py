@@ -5,7 +5,7 @@ Storage follows thesis chapter 4 (§4.2.1, eqs. (4.2)–(4.3), Table 4.3): one b
 that a message carries only positive entries (thesis §4.2.2). All agents' matrices live in one ``GroupTable``
 (``group_table``), stored sparsely: a column (i, ·, j) never holds more than L_j members (``groups.admit`` keeps
 every group to L_j in the bundle phase and in the merge, and a bid displaces before it joins), so each holder keeps
-at most W = max_j L_j member slots per task and memory grows like N·M·L, not N·N·M (issue 13). ``known[i, k]``
+at most W = max_j L_j member slots per task and memory grows like N·M·L, not N·N·M. ``known[i, k]``
 records which agents i has discovered (its own id always; others on first contact or when a relayed triple names
 them, thesis Table 4.5).
 

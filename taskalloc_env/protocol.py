@@ -362,7 +362,7 @@ class Protocol:
     def _count_seen_quits(self, listing: np.ndarray | None) -> None:
         """``quits_seen``: a pending quit (thesis Alg 9 l. 7, X_i[i][j] = 0) is seen when a merge (Alg 6; Johnson
         §3.3's rule for a sender's own entry) drops the quitter from the task's group in another agent's table that
-        listed it. It is counted once; a quit the quitter re-bid before that is never seen (issue 10: under
+        listed it. It is counted once; a quit the quitter re-bid before that is never seen (under
         ``quit_block=none`` the quitter re-bids in the same bundle phase, so nobody learns of the quit)."""
         if listing is None:
             return

@@ -1,4 +1,4 @@
-"""Bad and hostile input (issue 15): every case is refused with an error that names what is wrong.
+"""Bad and hostile input: every case is refused with an error that names what is wrong.
 
 Explicit scenarios, config fields, scenario names and files, resource estimates, crafted checkpoints and fault
 options; then the command lines: one line on stderr, exit status 2, existing output left as it was.

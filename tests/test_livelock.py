@@ -144,7 +144,7 @@ DMG = {"distance_cost": "from_start", "marginal_gain": "frozen", "agents_per_tas
 def test_bid_warping_changes_nothing_for_cbba_on_dmg_scores(scenario):
     """Warping (Johnson §4.3) shares min(c_ij, the earlier bundle bids) so that external bids follow DMG; on a DMG
     score CBBA's greedy bids already never rise along a bundle (Johnson §3.4.1, (3.6)), so the minimum is c_ij and
-    ``bid_warping`` is a no-op: same paths, rounds, messages and score on 50 seeds (issue 10, "Must show")."""
+    ``bid_warping`` is a no-op: same paths, rounds, messages and score on 50 seeds."""
     for seed in range(50):
         runs = []
         for warping in (True, False):

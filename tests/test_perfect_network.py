@@ -1,4 +1,4 @@
-"""The ``perfect`` network gives exactly the pre-network results (issue 11, "Must show": same seeds, identical
+"""The ``perfect`` network gives exactly the pre-network results (same seeds, identical
 allocations and counters).
 
 ``tests/data/perfect_network_04b92bb.json`` holds CBGA, CBGABI and CBBA episodes on the default scenario and with

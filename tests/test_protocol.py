@@ -389,7 +389,7 @@ def test_quit_block_none_lets_the_quitter_bid_again_at_once():
 
 
 def test_a_quit_the_others_list_is_seen():
-    """``quits_seen`` (issue 10): agents 0 and 2 hold T0 (L = 3) and every table lists both after round 1; agent 0
+    """``quits_seen``: agents 0 and 2 hold T0 (L = 3) and every table lists both after round 1; agent 0
     quits at T = 3 and, blocked by ``until_joined``, does not re-bid. The merge of round 4 drops agent 0 from T0 in
     the tables of agents 1 and 2: one quit, seen once (not once per agent, not again in later rounds)."""
     p = protocol(quit_scenario(), task_quitting=True, delta=1, quit_block="until_joined")
@@ -409,8 +409,8 @@ def test_a_quit_the_others_list_is_seen():
 
 
 def test_a_quit_re_bid_in_the_same_bundle_phase_is_not_seen():
-    """The case issue 10 measured (985 of 989 quits at L_j = 4): with ``quit_block=none`` the quitter bids on the task
-    again before the round ends, the others' tables never drop it, and the quit goes unseen."""
+    """The common case (985 of 989 quits at L_j = 4 were re-bid unseen): with ``quit_block=none`` the quitter bids on
+    the task again before the round ends, the others' tables never drop it, and the quit goes unseen."""
     p = protocol(quit_scenario(), task_quitting=True, delta=1, quit_block="none")
     p.bid(0, 0)
     p.bid(2, 0)
