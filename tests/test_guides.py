@@ -8,7 +8,7 @@ Each guide's fenced blocks run in order in an empty folder (on ``sys.path``), on
 - ```` ```bash ````: each line is a ``taskalloc`` command, run as ``python -m taskalloc`` in the folder; it must exit 0
   and print every line of the output block after it (an excerpt). These run the baselines' comparison, so they are
   the slow half of the test;
-- any other info string (``sh``, ``python generator``) is shown, not run.
+- any other info string (``sh``) is shown, not run.
 """
 
 from __future__ import annotations

@@ -43,7 +43,7 @@ PROTOCOL_GROUP = group("protocol", (
     Field('consensus', 'choice', choices=('sync', 'every_step', 'acbba'), default='sync',
           meaning=('exchange when every agent has passed \\| `every_step` \\| `acbba` (asynchronous: one step is one '
                    'tick, see below)'),
-          source='issue #2; Johnson §4.1'),
+          source='thesis §3.2.3 (`sync`); `every_step`: ours; Johnson §4.1 (`acbba`)'),
     Field('max_bundle', 'int', low=1, high=MAX_COUNT, optional=True, default=None,
           meaning='M_m, the bundle cap (null = N_m, no cap)',
           source='thesis §3.1.1–3.1.2'),
