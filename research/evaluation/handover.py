@@ -26,9 +26,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from research.policies.handover import Handover
+from research.policies.oracle import OraclePolicy
 from taskalloc.evaluation.episodes import evaluate, skip_reason, solve
 from taskalloc.evaluation.seeds import add_heldout_arguments, heldout_seeds
-from taskalloc.policies import OraclePolicy, Policy, make_policy
+from taskalloc.policies import Policy, make_policy
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import resolve_config
 from taskalloc_env.env import TaskAllocEnv

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 import torch as th
 
+from research.policies.oracle import OraclePolicy
 from research.training import distil
-from taskalloc.policies import OraclePolicy, make_policy, rollout
+from taskalloc.policies import make_policy, rollout
 from taskalloc_env import ConfigError, TaskAllocEnv
 
 

@@ -11,7 +11,8 @@ import pytest
 
 from research.evaluation import handover
 from research.policies.handover import Handover
-from taskalloc.policies import OraclePolicy, Policy, make_policy, rollout
+from research.policies.oracle import OraclePolicy
+from taskalloc.policies import Policy, make_policy, rollout
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.errors import run_cli
 

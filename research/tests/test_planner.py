@@ -13,9 +13,10 @@ import torch as th
 from helpers import assert_same_actions
 
 from research.policies.handover import Handover
+from research.policies.oracle import OraclePolicy
 from research.policies.round_zero import RoundZeroPlanner, bid_log_odds
 from research.training import planner
-from taskalloc.policies import OraclePolicy, make_policy, rollout
+from taskalloc.policies import make_policy, rollout
 from taskalloc.policies.base import stack_observations
 from taskalloc.policies.checkpoint import CheckpointError
 from taskalloc.policies.networks import PoolingActor
