@@ -9,8 +9,9 @@ baselines on held-out instances.
 through the experiment runner's ``run_episodes`` (seed s is the same instance for every row; ``--backend ray`` fans out
 over Ray), and writes per-seed figures to ``results/learning/heldout_<setting>.json``. Rows: the baselines (random,
 CBGA, CBGABI, SGAMA, LNS (``taskalloc.policies.local_search``, a lower bound on the optimum at every size), the exact
-optimum where it is tractable, the oracle that bids along the optimum through the protocol,
-``taskalloc.policies.oracle``, behaviour cloning of CBGABI) and, per learned configuration, one row per training seed,
+optimum where it is tractable, the oracle that bids along the optimum through the protocol and behaviour cloning of
+CBGABI — both research's, played when ``research`` is imported, else kept from the results file — and, per learned
+configuration, one row per training seed,
 read from ``<runs>/<config>/seed<k>`` (the training commands' ``--out-dir``; ``models/<name>`` for seeds that are
 committed models). It also copies each run's ``eval.csv`` and ``summary.yaml`` to ``results/learning/runs/``, so that
 ``render`` needs nothing outside the repository. Rows already in the results file are kept while their weights are
@@ -397,7 +398,7 @@ def training_table(runs_dir: Path, configs: Sequence[Config]) -> str:
             ppo = s.get("ppo", {})
             steps = s.get("steps", ppo.get("steps"))
             seconds = s.get("train_seconds", ppo.get("seconds"))
-            # a planner (training.planner) learns from labelled states, not from agent steps
+            # a planner (research.training.planner) learns from labelled states, not from agent steps
             body.append([config.label, path.parent.name.removeprefix("seed"),
                          "–" if steps is None else f"{steps:,}".replace(",", " "),
                          f"{s['wall_seconds'] / 60:.1f}", f"{s['cpu_seconds'] / 60:.1f}" if "cpu_seconds" in s else

@@ -164,8 +164,7 @@ def load_config(argv: Sequence[str] | None = None, hook: PartnerHook | None = No
 
 # -- networks ---------------------------------------------------------------------------------------------------------
 class ActorSpec(Protocol):
-    """The config fields an actor is built from (``MappoConfig``, ``taskalloc.training.distil.DistilConfig``,
-    ``taskalloc.training.planner.PlannerConfig``)."""
+    """The config fields an actor is built from (``MappoConfig``, and research's distillation and planner configs)."""
 
     actor: str
     hidden: int
