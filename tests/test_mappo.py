@@ -140,7 +140,7 @@ def test_attention_actor_is_task_permutation_equivariant_and_masks():
 
 
 def test_bad_configs_are_refused_in_one_line(capsys):
-    with pytest.raises(ConfigError, match="not protocol options"):
+    with pytest.raises(ConfigError, match="not options a policy plays by"):
         mappo.load_config(["--env-overrides", "{n_agents: 3}"])
     with pytest.raises(ConfigError, match="overlap the test seeds"):
         mappo.load_config(["--seed", "10"])
