@@ -165,6 +165,17 @@ for _algo in (None, "maskable_ppo", "ppo", "rllib_ppo", "mappo"):
     register_checkpoint_loader(_algo, _plain)
 
 
+def _json_of(path: Any) -> Any:
+    """The ``model.json`` a source loads (a folder's, a stem's), absolute: one key per checkpoint."""
+    if not isinstance(path, Path):
+        return path
+    if path.is_dir():
+        path = path / "model.json"
+    elif path.suffix not in (".json", ".zip"):
+        path = path.with_name(path.name + ".json")
+    return path.resolve()
+
+
 def load_learned(source: str, _seen: tuple[str, ...] = (), **kwargs: Any) -> Policy:
     """``learned:<source>``: the checkpoint, loaded by the loader its meta ``algo`` selects; ``kwargs`` are that
     loader's options (``LearnedPolicy``'s: ``deterministic``, ``allow_pickle``)."""
@@ -172,7 +183,7 @@ def load_learned(source: str, _seen: tuple[str, ...] = (), **kwargs: Any) -> Pol
     from taskalloc.policies.learned import resolve
 
     path = resolve(source)
-    key = str(path)
+    key = str(_json_of(path))
     if key in _seen:
         raise CheckpointError(f"{source}: its meta names a checkpoint that names it again ({' → '.join(_seen)} → "
                               f"{key})")

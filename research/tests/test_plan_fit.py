@@ -12,7 +12,7 @@ import yaml
 from research.evaluation import plan_fit
 from taskalloc_env.errors import run_cli
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PLANNER = "learned:planner_default"     # the committed planner (a pooling actor: it plays at any size)
 
 

@@ -24,7 +24,7 @@ from taskalloc_env import TaskAllocEnv
 from taskalloc_env.errors import run_cli
 
 OVERRIDES = {"task_quitting": True, "delta": 1}
-SMALL = Path(__file__).parents[1] / "configs" / "scenarios" / "train_small.yaml"
+SMALL = Path(__file__).parents[2] / "configs" / "scenarios" / "train_small.yaml"
 
 
 # three epochs on 20 train_small instances with exact labels, handed over to CBGABI
@@ -288,11 +288,15 @@ def test_the_checkpoint_says_whether_the_planner_replans(trained, tmp_path):
 
 
 def test_a_planner_that_hands_over_to_a_planner_is_refused(trained, tmp_path):
-    """A 'then' naming a planner (here itself) would load without end: refused with a clear error."""
-    folder = tmp_path / "self"
-    folder.mkdir()
+    """A 'then' naming a planner (here a copy inside its folder) is refused, and naming itself too, at once."""
+    folder, inner = tmp_path / "outer", tmp_path / "outer" / "inner"
+    inner.mkdir(parents=True)
+    rewritten(trained, inner)
     with pytest.raises(CheckpointError, match="is itself a planner"):
-        make_policy(f"learned:{rewritten(trained, folder, then=f'learned:{folder}')}")
+        make_policy(f"learned:{rewritten(trained, folder, then='learned:inner')}")
+    for itself in ("learned:.", "learned:model.json", "learned:model"):
+        with pytest.raises(CheckpointError, match="names it again"):
+            make_policy(f"learned:{rewritten(trained, folder, then=itself)}")
     with pytest.raises(ValueError, match="options \\['deterministic'\\] are not taken"):
         make_policy(f"learned:{trained}", deterministic=False)
 
