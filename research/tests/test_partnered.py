@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_mappo import model_for  # tests/, on the path through research/tests/conftest.py
 
 from research.policies.handover import Handover
 from research.policies.round_zero import RoundZeroPlanner
@@ -24,18 +25,6 @@ def small_config(**fields) -> partnered.PartneredConfig:
     cfg = partnered.PartneredConfig(hidden=32, heads=2, layers=1, **fields)
     cfg.check()
     return cfg
-
-
-def model_for(group: mappo.Group, cfg: mappo.MappoConfig, seed: int = 0) -> mappo.ActorCritic:
-    import torch as th
-
-    th.manual_seed(seed)
-    actor = mappo.make_actor(cfg, group.layout.own_size, group.layout.task_size)
-    model = mappo.ActorCritic(actor, StateCritic(group.n_equipment, cfg.hidden, cfg.heads))
-    with th.no_grad():          # output layers away from zero, so that logits differ clearly between actions
-        for layer in actor.output_layers():
-            layer.weight.normal_(0, 1.0)
-    return model
 
 
 # -- a bidder for after a planned round 0 (round_zero) ---------------------------------------------------------------
