@@ -2,17 +2,17 @@
 
     taskalloc compare --scenario default --episodes 20 --out results/compare
 
-Rows: random, CBBA (only where every L_j = 1), CBGA, CBGA+TQ, CBGA+TB, CBGABI, the centralised greedy SGAMA
-(thesis §3.3.3, Alg 7; no rounds or messages), the centralised group search LNS (``taskalloc.policies.local_search``,
-ours: a lower bound on the optimum, how much there is to take) and, for every committed checkpoint
-``models/<name>/model.json`` whose observation layout fits the scenario, the learned policy; ``--policy`` adds rows
-(a policy name, or your own policy by import path ``mypkg.mymodule:MyPolicy``). Seed s is the same instance
-for every row (paired design, thesis §5.3.1). The table gives mean ± sd of the score (``scoring.team_score``), valid
-tasks, consensus rounds and messages received (``msgs / agent`` = messages / N_n, the thesis's per-agent communication
-steps), episodes that hit the round bound (kept, counted), and the paired comparison with CBGA (mean difference, paired
-t-test p-value, share of seeds won). ``--out DIR`` writes ``compare.md``, ``compare.csv`` (the table), ``episodes.csv``
-and ``compare.png`` (score bars with sd; per-seed differences against CBGA); a folder that already holds files is
-refused unless ``--overwrite`` is given.
+Rows: random, CBBA (only where every L_j = 1), CBGA, CBGA+TQ, CBGA+TB, CBGABI, the centralised greedy SGAMA (thesis
+§3.3.3, Alg 7; no rounds or messages), the centralised group search LNS (``taskalloc.policies.local_search``, ours: a
+lower bound on the optimum, how much there is to take) and the default learned rows ``DEFAULT_LEARNED`` (two committed
+models, when their observation layout fits the scenario; ``--learned`` names others; ``--policy`` adds rows: a policy
+name, or your own policy by import path ``mypkg.mymodule:MyPolicy``). Seed s is the same instance for
+every row (paired design, thesis §5.3.1). The table gives mean ± sd of the score (``scoring.team_score``), valid tasks,
+consensus rounds and messages received (``msgs / agent`` = messages / N_n, the thesis's per-agent communication steps),
+episodes that hit the round bound (kept, counted), and the paired comparison with CBGA (mean difference, paired t-test
+p-value, share of seeds won). ``--out DIR`` writes ``compare.md``, ``compare.csv`` (the table), ``episodes.csv`` and
+``compare.png`` (score bars with sd; per-seed differences against CBGA); a folder that already holds files is refused
+unless ``--overwrite`` is given.
 """
 
 from __future__ import annotations
@@ -50,10 +50,14 @@ COLUMNS = (("score", "score"), ("valid_tasks", "valid tasks"), ("rounds", "round
            ("comm_steps_to_agreement", "msgs / agent to agreement"), ("comm_steps", "msgs / agent to the end"))
 
 
+# the learned rows of the default comparison (docs/decisions.md, "Product and research"): the best plain bidder
+# (MAPPO, pooling actor, 1 M steps) and the SB3 PPO bidder
+DEFAULT_LEARNED = ("mappo_small_pooling_1m", "train_small")
+
+
 def learned_checkpoints() -> list[str]:
-    """The committed models (``models/<name>/model.json``) by name, in name order."""
-    return [name for name in resources.names("models", suffix="")
-            if (resources.folder("models") / name / "model.json").is_file()]
+    """The default learned rows that are committed models (``models/<name>/model.json``)."""
+    return [name for name in DEFAULT_LEARNED if (resources.folder("models") / name / "model.json").is_file()]
 
 
 def usable_learned(source: str, cfg: TaskAllocConfig) -> tuple[str | None, str]:
@@ -203,7 +207,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "the cluster RAY_ADDRESS names (pip install taskalloc[ray]); the same table either way")
     parser.add_argument("--learned", action="append", default=None, metavar="NAME_OR_PATH",
                         help="a learned policy to include: a committed model's name or a checkpoint path "
-                             "(repeatable; default: every committed model in models/)")
+                             "(repeatable; default: " + " and ".join(DEFAULT_LEARNED) + ")")
     parser.add_argument("--policy", dest="policies", action="append", default=[], metavar="NAME_OR_PATH",
                         help="add a row: a policy name (cbgabi:delta=3, learned:NAME) or your own policy by import "
                              "path, mypkg.mymodule:MyPolicy (a class, an object with act, or a function of the "

@@ -9,8 +9,9 @@ baselines on held-out instances.
 through the experiment runner's ``run_episodes`` (seed s is the same instance for every row; ``--backend ray`` fans out
 over Ray), and writes per-seed figures to ``results/learning/heldout_<setting>.json``. Rows: the baselines (random,
 CBGA, CBGABI, SGAMA, LNS (``taskalloc.policies.local_search``, a lower bound on the optimum at every size), the exact
-optimum where it is tractable, the oracle that bids along the optimum through the protocol,
-``taskalloc.policies.oracle``, behaviour cloning of CBGABI) and, per learned configuration, one row per training seed,
+optimum where it is tractable, the oracle that bids along the optimum through the protocol and behaviour cloning of
+CBGABI — both research's, played when ``research`` is imported, else kept from the results file — and, per learned
+configuration, one row per training seed,
 read from ``<runs>/<config>/seed<k>`` (the training commands' ``--out-dir``; ``models/<name>`` for seeds that are
 committed models). It also copies each run's ``eval.csv`` and ``summary.yaml`` to ``results/learning/runs/``, so that
 ``render`` needs nothing outside the repository. Rows already in the results file are kept while their weights are
@@ -53,7 +54,9 @@ from taskalloc.evaluation.distributed import BACKENDS
 from taskalloc.evaluation.episodes import CENTRALISED, Episode, default_jobs, run_episodes, skip_reason
 from taskalloc.evaluation.report import markdown_table
 from taskalloc.evaluation.stats import format_p, paired
-from taskalloc_env import resolve_config, resources
+from taskalloc.policies.learned import named_model
+from taskalloc.policies.registry import make_policy
+from taskalloc_env import resolve_config
 from taskalloc_env.errors import ConfigError, run_cli
 
 OUT = Path("results") / "learning"
@@ -69,12 +72,12 @@ class Config:
 
     label: str
     name: str
-    committed: Mapping[int, str] = dataclasses.field(default_factory=dict)    # seed → committed model folder
+    committed: Mapping[int, str] = dataclasses.field(default_factory=dict)    # seed → named model
 
     def checkpoint(self, seed: int, runs: Path) -> Path:
-        if seed in self.committed:
-            return resources.folder("models") / self.committed[seed]
-        return runs / self.name / f"seed{seed}"
+        """A named model's folder (committed, or in a registered folder), else ``<runs>/<name>/seed<seed>``."""
+        found = named_model(self.committed[seed]) if seed in self.committed else None
+        return Path(str(found)).parent if found is not None else runs / self.name / f"seed{seed}"
 
 
 SB3 = Config("SB3 MaskablePPO, pooling, local critic", "train_small", {0: "train_small"})
@@ -90,12 +93,6 @@ LOSS = Config("MAPPO attention, trained under 20 % loss", "mappo_loss")
 LOSS_POOLING = Config("MAPPO pooling, trained under 20 % loss", "mappo_loss_pooling")
 MIXTURE_POOLING = Config("MAPPO pooling, curriculum 4×8 → 10×20", "mappo_mixture_pooling")
 DELAY_POOLING = Config("MAPPO pooling, trained under message delay (0–2 rounds)", "mappo_delay_pooling")
-PLANNER = Config("round-0 planner learned from LNS on 10 × 20 (ours), then MAPPO pooling 1 M", "planner_default",
-                 {0: "planner_default"})
-PLANNER_SMALL = Config("round-0 planner, attention, learned from the optimum on 4 × 8 (ours), then MAPPO pooling 1 M",
-                       "planner_small_attention", {0: "planner_small_attention"})
-AFTER_PLANNER = Config("round-0 planner, attention (ours), then MAPPO pooling 1 M trained after that round 0 (ours)",
-                       "mappo_after_planner_small", {0: "mappo_after_planner_small"})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -116,11 +113,10 @@ class Setting:
 
 SETTINGS = {s.name: s for s in (
     Setting("train_small", "training scenario, 4 × 8, L_j ∈ {1, 2}", "train_small", {},
-            (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING, PLANNER,
-             PLANNER_SMALL, AFTER_PLANNER), behaviour_cloning=True),
+            (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING),
+            behaviour_cloning=True),
     Setting("default", "default scenario, 10 × 20, L_j = 4", "default", {},
-            (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING, PLANNER,
-             PLANNER_SMALL, AFTER_PLANNER)),
+            (SB3, POOLING, POOLING_1M, POOLING_3M, TEAM, ATTENTION, ATTENTION_1M, MIXTURE, MIXTURE_POOLING)),
     Setting("size_8x16", "8 × 16, L_j = 3 (no model trained on it)", "default",
             {"n_agents": 8, "n_tasks": 16, "agents_per_task": 3}, (POOLING_1M, ATTENTION, MIXTURE)),
     Setting("size_20x40", "20 × 40, L_j = 4 (no model trained on it)", "default",
@@ -172,8 +168,9 @@ def rows_to_run(setting: Setting, runs: Path,
     rows = [{"label": NAMES[b], "kind": "centralised" if b in CENTRALISED else "baseline", "solver": b}
             for b in setting.baselines if not skip_reason(b, cfg)]
     if setting.behaviour_cloning:
-        bc = resources.folder("models") / "train_small_bc" / "bc.json"
-        rows.append({"label": NAMES["bc"], "kind": "baseline", "solver": f"learned:{shown(bc)}"})
+        bc = named_model("train_small_bc")     # research's: a kept row stays when it is not registered
+        where = shown(Path(str(bc)).parent / "bc.json") if bc is not None else "train_small_bc/bc.json"
+        rows.append({"label": NAMES["bc"], "kind": "baseline", "solver": f"learned:{where}"})
     for config in setting.configs:
         for seed in SEEDS:
             folder = config.checkpoint(seed, runs)
@@ -212,6 +209,10 @@ def evaluate(setting: Setting, episodes: int, jobs: int, backend: str, runs: Pat
         if _key(row) in kept:
             results.append(kept[_key(row)])
             continue
+        if row["kind"] == "baseline" and not playable(row["solver"]):
+            print(f"{setting.name}: {row['label']}: left out, {row['solver']} is not registered (a research "
+                  "policy or model: run with research imported)", flush=True)
+            continue
         if row["kind"] == "centralised" and row["label"] in centralised:
             results.append({**centralised[row["label"]], "copied_from": setting.centralised_from})
             print(f"{setting.name}: {row['label']}: copied from {shown(source)} (it sends no message)", flush=True)
@@ -227,6 +228,15 @@ def evaluate(setting: Setting, episodes: int, jobs: int, backend: str, runs: Pat
             archive_logs(Path(row["folder"]), out / "runs" / row["config"] / f"seed{row['seed']}")
     path.write_text(json.dumps({"setting": setting.name, "seeds": seeds, "rows": results}, indent=0) + "\n")
     return path
+
+
+def playable(solver: str) -> bool:
+    """Whether a baseline's policy can be built here (a plug-in's only once it is registered)."""
+    try:
+        make_policy(solver)
+    except ValueError:
+        return False
+    return True
 
 
 def _key(row: Mapping[str, Any]) -> tuple:
@@ -388,7 +398,7 @@ def training_table(runs_dir: Path, configs: Sequence[Config]) -> str:
             ppo = s.get("ppo", {})
             steps = s.get("steps", ppo.get("steps"))
             seconds = s.get("train_seconds", ppo.get("seconds"))
-            # a planner (training.planner) learns from labelled states, not from agent steps
+            # a planner (research.training.planner) learns from labelled states, not from agent steps
             body.append([config.label, path.parent.name.removeprefix("seed"),
                          "–" if steps is None else f"{steps:,}".replace(",", " "),
                          f"{s['wall_seconds'] / 60:.1f}", f"{s['cpu_seconds'] / 60:.1f}" if "cpu_seconds" in s else

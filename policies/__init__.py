@@ -5,8 +5,7 @@ from __future__ import annotations
 from taskalloc.policies.base import Policy
 from taskalloc.policies.centralised import exact, sgama
 from taskalloc.policies.local_search import local_search
-from taskalloc.policies.oracle import OraclePolicy
-from taskalloc.policies.registry import POLICY_NAMES, make_policy
+from taskalloc.policies.registry import POLICY_NAMES, make_policy, register_checkpoint_loader, register_policy
 from taskalloc.policies.rollout import rollout
 from taskalloc.policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
 
@@ -15,13 +14,14 @@ __all__ = [
     "ACBBAPolicy",
     "CBBAPolicy",
     "CBGAPolicy",
-    "OraclePolicy",
     "PassPolicy",
     "Policy",
     "RandomPolicy",
     "exact",
     "local_search",
     "make_policy",
+    "register_checkpoint_loader",
+    "register_policy",
     "rollout",
     "sgama",
 ]

@@ -38,6 +38,13 @@ FORMAT, VERSION = "taskalloc-checkpoint", 1
 MAX_JSON_BYTES = 1 << 20
 MAX_SIZE = 1 << 16              # largest integer size a network may be built with
 MAX_PARAMETERS = 50_000_000     # largest actor a checkpoint may describe (refused before anything is allocated)
+# what a checkpoint's env_overrides may set: the protocol options a policy plays by (ours). Never the network (range,
+# loss, delays, failures, timing), the round bound or the instance (pop-up tasks): those are the run's, not the policy's
+NOT_POLICY_OPTIONS = ("comm_range", "edge_rule", "max_rounds", "message_loss", "loss_model", "burst_enter",
+                      "burst_leave", "burst_loss", "max_delay", "dropouts", "dropout_rounds", "dropout_schedule",
+                      "silence_timeout", "popup_tasks", "popup_period", "popup_arrivals", "popup_times",
+                      "mission_time_per_tick", "message_ticks", "build_ticks", "separation_time")
+POLICY_OPTIONS = tuple(name for name in PROTOCOL_FIELDS if name not in NOT_POLICY_OPTIONS)
 
 
 class CheckpointError(ConfigError):
@@ -65,9 +72,10 @@ def save(stem: str | Path, actor: Any, own_features: Sequence[str], task_feature
 
     if type(actor) not in NETWORKS.values():
         raise CheckpointError(f"{type(actor).__name__} is not a known network class ({sorted(NETWORKS)})")
-    unknown = sorted(set(env_overrides) - set(PROTOCOL_FIELDS))
+    unknown = sorted(set(env_overrides) - set(POLICY_OPTIONS))
     if unknown:
-        raise CheckpointError(f"env_overrides {unknown} are not protocol options ({', '.join(PROTOCOL_FIELDS)})")
+        raise CheckpointError(f"env_overrides {unknown} are not options a policy plays by "
+                              f"({', '.join(POLICY_OPTIONS)})")
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     spec = {"format": FORMAT, "version": VERSION,
@@ -153,6 +161,9 @@ def _build(spec: Mapping[str, Any], weights: Mapping[str, Any], where: str) -> C
     for key, value in config.items():
         if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_SIZE:
             raise CheckpointError(f"{where}: network config {key}={value!r} is not an integer in 1..{MAX_SIZE}")
+    bad = sorted(k for k, v in weights.items() if v.is_floating_point() and not bool(v.isfinite().all()))
+    if bad:
+        raise CheckpointError(f"{where}: weights {bad} hold NaN or infinite values")
     expected = sum(int(v.numel()) for v in weights.values())
     if expected > MAX_PARAMETERS:
         raise CheckpointError(f"{where}: {expected} weights exceed the limit of {MAX_PARAMETERS}")
@@ -170,8 +181,9 @@ def _build(spec: Mapping[str, Any], weights: Mapping[str, Any], where: str) -> C
     if not (_names(own) and _names(task)):
         raise CheckpointError(f"{where}: observation.own_features and .task_features must be lists of names")
     overrides = spec.get("env_overrides") or {}
-    if not isinstance(overrides, dict) or set(overrides) - set(PROTOCOL_FIELDS):
-        raise CheckpointError(f"{where}: env_overrides {overrides!r} may only set {', '.join(PROTOCOL_FIELDS)}")
+    if not isinstance(overrides, dict) or set(overrides) - set(POLICY_OPTIONS):
+        raise CheckpointError(f"{where}: env_overrides {overrides!r} may only set the options a policy plays by: "
+                              f"{', '.join(POLICY_OPTIONS)}")
     meta = spec.get("meta") or {}
     if not isinstance(meta, dict):
         raise CheckpointError(f"{where}: meta must be a mapping")
@@ -228,7 +240,7 @@ def _from_sb3(policy_kwargs: Any, state: Mapping[str, Any], taskalloc: Any, wher
     except KeyError as exc:
         raise CheckpointError(f"{where}: not a policy of this project (no weight {exc})") from None
     meta = taskalloc if isinstance(taskalloc, dict) else {}
-    overrides = {k: v for k, v in (meta.get("env_overrides") or {}).items() if k in PROTOCOL_FIELDS}
+    overrides = dict(meta.get("env_overrides") or {})
     spec = {"network": {"class": network, "config": config},
             "observation": {"own_features": [*OWN_FEATURES, *(f"equipment_{e}" for e in range(n_equipment))],
                             "task_features": list(TASK_FEATURES)},

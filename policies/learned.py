@@ -32,14 +32,43 @@ from taskalloc_env.observation import FAULT_FEATURES, POPUP_FEATURES, TEAM_FEATU
 OPTIONAL_TASK_FEATURES = FAULT_FEATURES + POPUP_FEATURES + TEAM_FEATURES
 
 
+# folders of named models beyond the committed ones (``register_model_folder``; research registers its own)
+MODEL_FOLDERS: list[Path] = []
+
+
+def register_model_folder(path: str | Path) -> None:
+    """Let ``learned:<name>`` also find the models in ``path/<name>/model.json`` (after the committed ones)."""
+    path = Path(path).resolve()
+    if not path.is_dir():
+        raise CheckpointError(f"model folder {str(path)!r} is not a folder")
+    if path not in MODEL_FOLDERS:
+        MODEL_FOLDERS.append(path)
+
+
+def named_model(name: str) -> Any | None:
+    """A named model's ``model.json``: a committed one first, then the registered folders; ``None`` if none."""
+    if not resources.is_name(name):
+        return None
+    committed = resources.folder("models") / name / "model.json"
+    if committed.is_file():
+        return committed
+    return next((folder / name / "model.json" for folder in MODEL_FOLDERS
+                 if (folder / name / "model.json").is_file()), None)
+
+
 def resolve(source: str | Path) -> Any:
-    """A committed model's name (``train_small``) → its ``model.json``; anything else is a path."""
-    if isinstance(source, str) and resources.is_name(source) and not Path(source).exists():
-        try:
-            return resources.named("models", source, suffix="") / "model.json"
-        except ValueError as exc:
-            raise CheckpointError(f"{exc}. Committed models ship with the package; a model you trained is loaded "
-                                  "by its path (learned:runs/NAME)") from None
+    """A model's name (``train_small``) → its ``model.json``, the committed models first and never a folder of the
+    working directory (a local folder is loaded by an explicit path: ``learned:./NAME``); anything else is a path."""
+    if isinstance(source, str) and resources.is_name(source):
+        found = named_model(source)
+        if found is not None:
+            return found
+        known = ", ".join(resources.names("models", suffix="") + sorted(
+            {p.name for folder in MODEL_FOLDERS for p in folder.iterdir() if (p / "model.json").is_file()}))
+        local = f"; the folder {source!r} here is loaded by its path, learned:./{source}" if Path(source).exists() \
+            else ""
+        raise CheckpointError(f"no model named {source!r} (named models: {known}){local}. Committed models ship "
+                              "with the package; a model you trained is loaded by its path (learned:runs/NAME)")
     return Path(source)
 
 

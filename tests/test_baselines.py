@@ -27,18 +27,16 @@ from helpers import (
 from taskalloc.policies import (
     CBBAPolicy,
     CBGAPolicy,
-    OraclePolicy,
     PassPolicy,
     RandomPolicy,
     exact,
-    local_search,
     make_policy,
     rollout,
     sgama,
 )
 from taskalloc_env import TaskAllocConfig, TaskAllocEnv, generate
 from taskalloc_env.cbba_table import NONE
-from taskalloc_env.config import from_mapping, resolve_config
+from taskalloc_env.config import from_mapping
 
 VARIANTS = [CBGAPolicy(), CBGAPolicy(task_quitting=True), CBGAPolicy(team_bidding=True),
             CBGAPolicy(team_bidding=True, task_quitting=True)]
@@ -362,39 +360,6 @@ def test_exact_matches_brute_force_with_equipment_and_prerequisites(kind, seed):
                 for i in range(3)]
     best = max(reference_team_score(s, paths)[0] for paths in itertools.product(*feasible))
     assert exact(s, cfg).score == pytest.approx(best)
-
-
-def test_the_oracle_reaches_the_optimum_through_the_protocol_on_train_small():
-    """Bidding along the exact optimum's paths through the consensus reaches exactly the optimum on train_small: the
-    environment's action space is not what keeps a learned bidder below it (docs/learning.md)."""
-    env = TaskAllocEnv(resolve_config("train_small"))
-    for seed in range(8):
-        reached = rollout(env, OraclePolicy(), seed=seed)
-        best = exact(env.scenario, env.config)
-        assert reached.paths == best.paths and reached.score == best.score
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("scenario, seeds", [("train_small", range(8)), ("default", range(2))])
-def test_the_lns_oracle_reaches_the_group_search_allocation_through_the_protocol(scenario, seeds):
-    """The same play along LNS's allocation (``oracle-lns``) reaches it at sizes ``exact`` cannot solve: the default
-    scenario's action space holds LNS's 6.4 % above CBGABI (docs/learning.md)."""
-    env = TaskAllocEnv(resolve_config(scenario))
-    for seed in seeds:
-        reached = rollout(env, make_policy("oracle-lns"), seed=seed)
-        found = local_search(env.scenario, env.config)
-        assert reached.paths == found.paths and reached.score == found.score
-
-
-def test_the_oracle_refuses_an_unknown_solver_by_name():
-    with pytest.raises(ValueError, match="unknown solver 'greedy'; known: exact, lns"):
-        OraclePolicy("greedy")
-
-
-def test_the_oracle_names_the_size_limit_of_the_optimum():
-    env = TaskAllocEnv(resolve_config("default"))
-    with pytest.raises(ValueError, match="at most 6 agents and 9 tasks"):
-        rollout(env, make_policy("oracle"), seed=0)
 
 
 # -- quitting and team bidding where the thesis says they matter (thesis §5.3.2, Figs 5.7 / 5.13) --------------------

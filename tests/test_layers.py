@@ -104,6 +104,54 @@ def test_no_module_imports_the_bare_folder_names():
     assert not bare, "imports of bare folder names:\n" + "\n".join(bare)
 
 
+def research_imports(path: Path) -> list[str]:
+    """Where ``path`` names ``research`` in an import: ``import``/``from`` statements, ``importlib.import_module``
+    and ``__import__`` with a literal module name."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                 [node.module] if isinstance(node, ast.ImportFrom) and node.module else [])
+        if isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant):
+            func = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
+            if func in {"import_module", "__import__"} and isinstance(node.args[0].value, str):
+                names.append(node.args[0].value)
+        found += [f"line {node.lineno}: {n}" for n in names if n.split(".")[0] == "research"]
+    return found
+
+
+def test_no_product_module_imports_research(tmp_path):
+    """The product (taskalloc_env, policies, evaluation, training, taskalloc/) never names ``research`` in an import;
+    research plugs in through the registries and the partner hook (docs/decisions.md, "Product and research")."""
+    product = [p for package in PRODUCT for p in sorted((ROOT / FOLDERS[package]).rglob("*.py"))]
+    assert len(product) > 50
+    found = [f"{p.relative_to(ROOT)} {hit}" for p in product for hit in research_imports(p)]
+    assert not found, "the product imports research:\n" + "\n".join(found)
+    bad = tmp_path / "bad.py"      # the check sees each form
+    bad.write_text("import research\nfrom research.plugins import register\n"
+                   "def f():\n    import importlib\n    importlib.import_module('research.training.planner')\n")
+    assert len(research_imports(bad)) == 3
+
+
+@pytest.mark.slow
+def test_importing_the_whole_product_loads_no_research_module():
+    names = [n for n in modules() if layer(n) in PRODUCT]
+    code = ("import importlib, sys\n"
+            f"for name in {names!r}:\n"
+            "    try:\n        importlib.import_module(name)\n"
+            "    except ImportError as exc:\n        assert 'research' not in str(exc), exc\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'research'))\n")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
+
+
+def test_the_product_keeps_at_most_three_committed_models():
+    """models/ holds the product's learned models (docs/decisions.md, "Product and research"); research's are in
+    research/models."""
+    committed = sorted(p.name for p in (ROOT / "models").iterdir() if (p / "model.json").is_file())
+    assert committed == ["mappo_small", "mappo_small_pooling_1m", "train_small"]
+
+
 @pytest.mark.slow
 def test_the_wheel_holds_one_namespace_and_no_research(tmp_path):
     """Build the wheel and read its entries: top-level names are ``taskalloc`` and ``taskalloc_env`` only."""
@@ -114,3 +162,5 @@ def test_the_wheel_holds_one_namespace_and_no_research(tmp_path):
     assert tops == {"taskalloc", "taskalloc_env"}, tops
     assert "taskalloc/policies/__init__.py" in entries and "taskalloc/training/mappo.py" in entries
     assert not [e for e in entries if "research" in e.split("/") or e.startswith(("tests/", "benchmarks/"))]
+    models = {e.split("/")[3] for e in entries if e.startswith("taskalloc_env/_data/models/") and e.count("/") > 3}
+    assert models == {"mappo_small", "mappo_small_pooling_1m", "train_small"}, models

@@ -19,15 +19,13 @@ from taskalloc.policies.learned import LearnedPolicy, feature_columns
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.observation import ObservationLayout
 
-MODELS = ("train_small", "train_small_bc")
+MODELS = ("train_small", "mappo_small_pooling_1m")
 
 # produced by the code before column selection (commit 0f249f0), perfect network, scenario train_small:
 # (model, seed) -> (paths, score, rounds)
 BEFORE = {
     ("train_small", 0): ([[3, 4, 1, 5], [4, 1, 5], [0, 2, 6], [0, 7, 6]], 1121.77369366, 5),
     ("train_small", 1): ([[7, 5, 1], [6, 2, 3], [5, 1], [4, 6, 2, 3]], 1163.909157853, 4),
-    ("train_small_bc", 0): ([[0, 7, 5], [0, 2, 5], [4, 1, 6], [3, 4, 1, 6]], 1153.289464932, 6),
-    ("train_small_bc", 1): ([[6, 0, 3], [7, 2, 1], [2, 3], [4, 6, 1]], 1086.02291624, 6),
 }
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from taskalloc.evaluation import learning_report as lr
 from taskalloc.policies import make_policy, rollout
-from taskalloc_env import TaskAllocEnv, resolve_config
+from taskalloc_env import TaskAllocEnv, resolve_config, resources
 from taskalloc_env import network as netmod
 from taskalloc_env.scenario import generate
 
@@ -113,7 +113,7 @@ def test_a_run_without_weights_keeps_its_archived_row(tmp_path, monkeypatch):
     model = runs / config.name / "seed2"
     model.mkdir(parents=True)
     for name in ("model.json", "model.safetensors", "summary.yaml", "config.yaml", "eval.csv"):
-        shutil.copyfile(lr.resources.folder("models") / "train_small" / name, model / name)
+        shutil.copyfile(resources.folder("models") / "train_small" / name, model / name)
     monkeypatch.setattr(lr, "SEEDS", (0, 1, 2))
     lr.evaluate(setting, 2, 1, "local", runs, out, recompute=False)
     rows = json.loads((out / "heldout_tiny.json").read_text())["rows"]

@@ -132,7 +132,7 @@ def test_committed_models_load_by_name_and_beat_random():
     random_policy = make_policy("random")
     env = TaskAllocEnv("train_small", start_time_range=[0.0, 10.0], **make_policy("cbgabi").env_overrides)
     random_score = np.mean([rollout(env, random_policy, seed=s).score for s in seeds])
-    for name in ("train_small", "train_small_bc", "mappo_small_pooling", "mappo_small_pooling_1m"):
+    for name in ("train_small", "mappo_small_pooling_1m"):
         policy = make_policy(f"learned:{name}")
         assert policy.env_overrides == {"task_quitting": True, "delta": 1}
         score = np.mean([rollout(env, policy, seed=s).score for s in seeds])

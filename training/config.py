@@ -17,8 +17,9 @@ from typing import Any, TypeVar
 
 import yaml
 
+from taskalloc.policies.checkpoint import POLICY_OPTIONS
 from taskalloc_env import resources
-from taskalloc_env.config import PROTOCOL_FIELDS, read_yaml
+from taskalloc_env.config import read_yaml
 from taskalloc_env.errors import ConfigError
 
 C = TypeVar("C")
@@ -57,9 +58,10 @@ def check_at_least(cfg: Any, names: Sequence[str], minimum: int, what: str = "tr
 def check_protocol_options(cfg: Any, hint: str = "", what: str = "training") -> None:
     """``cfg.env_overrides`` names protocol options only (the options a policy plays with, saved in its
     checkpoint); ``hint`` is added to the error."""
-    unknown = sorted(set(cfg.env_overrides) - set(PROTOCOL_FIELDS))
+    unknown = sorted(set(cfg.env_overrides) - set(POLICY_OPTIONS))
     if unknown:
-        raise ConfigError(f"{what} field 'env_overrides': {unknown} are not protocol options{hint}")
+        raise ConfigError(f"{what} field 'env_overrides': {unknown} are not options a policy plays by (the protocol "
+                          f"options a checkpoint keeps, not the network, the round bound or the instance){hint}")
 
 
 def coerce(cls: type, name: str, value: Any) -> Any:
@@ -74,8 +76,10 @@ def coerce(cls: type, name: str, value: Any) -> Any:
     return value
 
 
-def parse(cls: type[C], argv: Sequence[str] | None, prog: str, description: str | None) -> C:
-    """``--config NAME_OR_FILE`` (a name from ``configs/training`` or a YAML path), then ``--field value``."""
+def parse(cls: type[C], argv: Sequence[str] | None, prog: str, description: str | None,
+          configs: Path | None = None) -> C:
+    """``--config NAME_OR_FILE`` (a name from ``configs`` when it holds it, else from ``configs/training``, or a YAML
+    path), then ``--field value``."""
     parser = argparse.ArgumentParser(prog=prog, description=description,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--config", metavar="NAME_OR_FILE",
@@ -88,7 +92,12 @@ def parse(cls: type[C], argv: Sequence[str] | None, prog: str, description: str 
     values: dict[str, Any] = {}
     source = args.pop("config", None)
     if source is not None:
-        path = resources.named("training", source) if resources.is_name(source) else Path(source)
+        if not resources.is_name(source):
+            path = Path(source)
+        elif configs is not None and (configs / f"{source}.yaml").is_file():
+            path = configs / f"{source}.yaml"
+        else:
+            path = resources.named("training", source)
         values = read_yaml(path, "training config") or {}
         if not isinstance(values, dict):
             raise ConfigError(f"training config {str(path)!r} must hold a mapping of {cls.__name__} fields")

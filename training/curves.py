@@ -1,7 +1,7 @@
 """Learning curves from the ``eval.csv`` files that ``taskalloc train`` writes.
 
     taskalloc curves --out docs/learning_curve.png \\
-        "PPO from scratch=models/train_small/eval.csv" "BC + PPO=models/train_small_bc/eval.csv"
+        "PPO from scratch=models/train_small/eval.csv" "BC + PPO=research/models/train_small_bc/eval.csv"
 
 Each curve is the greedy policy's mean score on the validation seeds (20000 …) against PPO steps (agent
 transitions), with the CBGABI mean on the same seeds as a dashed line.

@@ -18,15 +18,11 @@ env
 * only real decisions train the actor: an agent whose mask allows a single action (it has passed in this round,
   or nothing is open to it) contributes nothing to the policy loss or the entropy (its ratio is 1 either way).
 
-A bidder for after a planned round 0 (``round_zero``, ours): a round-0 planner (``taskalloc.training.planner``) plays
-round 0 of every training episode for every agent, as part of the environment's dynamics, and the actor learns the
-rounds after it, from the states the planner leaves (a bidder trained from its own round 0 never sees those). The team
-score gained in round 0 is the planner's, so it is no part of the actor's return. The checkpoint names the planner (meta
-``round_zero``) and ``learned:<run>`` loads as the pair, as the evaluation plays it. The mirror, ``later_rounds``: a
-fixed policy plays every round after round 0 and the actor learns round 0 alone, its return the team score the whole
-episode ends with (meta ``then``). Started from a round-0 planner's checkpoint (``init_from``, its pass logit set to 0
-so that the policy's arg-max is the planner's rule), this fine-tunes the planner on the team score itself instead of on
-the solver's labels.
+A partner (ours, optional): a fixed policy that plays round 0, or every round after it, as part of the
+environment's dynamics, while the actor learns the other rounds; its team score is no part of the actor's return when
+it plays round 0, and is when it plays the rest. The loop runs without one; ``main(argv, hook)`` takes a
+``PartnerHook`` that supplies it (``research.training.partnered`` trains bidders after a learned round-0 planner this
+way), and the checkpoint records it in its meta.
 
 Sizes: ``mixture`` lists scenarios (each with its overrides, number of env copies and ``from_steps``, the agent
 steps after which it joins: a curriculum). Every rollout collects ``n_steps`` steps from every copy of every active
@@ -60,12 +56,9 @@ from torch import nn
 from taskalloc.evaluation.episodes import evaluate, summarise
 from taskalloc.evaluation.seeds import TEST_SEEDS, VALIDATION_SEED_START
 from taskalloc.policies import checkpoint, make_policy
-from taskalloc.policies.base import Policy, stack_observations
-from taskalloc.policies.handover import with_partner
+from taskalloc.policies.base import Policy
 from taskalloc.policies.learned import LearnedPolicy, resolve
 from taskalloc.policies.networks import AttentionActor, PoolingActor, count_parameters
-from taskalloc.policies.registry import planner_pair
-from taskalloc.policies.round_zero import PLANNER
 from taskalloc.training.config import (
     check_at_least,
     check_protocol_options,
@@ -76,8 +69,7 @@ from taskalloc.training.config import (
     prepare_out_dir,
 )
 from taskalloc.training.critic import StateCritic
-from taskalloc_env.config import resolve_config
-from taskalloc_env.env import TaskAllocEnv
+from taskalloc.training.mappo_groups import Group, Partner, PartnerHook
 from taskalloc_env.errors import ConfigError, run_cli
 
 ACTORS = ("attention", "pooling")
@@ -114,12 +106,7 @@ class MappoConfig:
     heads: int = opt(4, "attention heads (attention actor and critic)")
     layers: int = opt(2, "self-attention layers of the attention actor")
     init_from: str | None = opt(None, "start from a checkpoint's actor, and its critic when its folder holds "
-                                      "critic.safetensors (a run folder or a committed model's name; a round-0 "
-                                      "planner's pass logit is set to 0)")
-    round_zero: str | None = opt(None, "a round-0 planner (learned:<planner checkpoint>, training.planner) that "
-                                       "plays round 0 for every agent; the actor learns the rounds after it")
-    later_rounds: str | None = opt(None, "a policy that plays every round after round 0; the actor learns round 0 "
-                                         "alone (e.g. a round-0 planner, init_from its checkpoint)")
+                                      "critic.safetensors (a run folder or a committed model's name)")
     # PPO
     total_steps: int = opt(1_000_000, "agent steps (one agent's decision in one env step) to train for")
     n_steps: int = opt(64, "steps per env copy in one rollout")
@@ -149,9 +136,6 @@ class MappoConfig:
         check_actor(self)
         check_protocol_options(self, "; scenario fields and network conditions go into the mixture entries' "
                                      "overrides")
-        if self.round_zero is not None and self.later_rounds is not None:
-            raise ConfigError("training fields 'round_zero' and 'later_rounds': give at most one (the actor learns "
-                              "the rounds after round 0, or round 0 alone)")
         if not self.mixture:
             raise ConfigError("training field 'mixture': needs at least one entry")
         for entry in self.mixture:
@@ -169,108 +153,18 @@ class MappoConfig:
                                   f"{seeds.stop - 1}; pick another --seed")
 
 
-def load_config(argv: Sequence[str] | None = None) -> MappoConfig:
-    cfg = parse(MappoConfig, argv, "taskalloc mappo", __doc__)
+def load_config(argv: Sequence[str] | None = None, hook: PartnerHook | None = None) -> MappoConfig:
+    """The run's config: ``MappoConfig``, or the hook's subclass of it (its configs folder resolves names first)."""
+    cls, prog = (MappoConfig, "taskalloc mappo") if hook is None else (hook.config, hook.prog)
+    cfg = parse(cls, argv, prog, __doc__, configs=None if hook is None else hook.configs)
     cfg.out_dir = cfg.out_dir or f"runs/{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     cfg.check()
     return cfg
 
 
-# -- environments: one group of copies per mixture entry ----------------------------------------------------------
-@dataclasses.dataclass(frozen=True)
-class Partner:
-    """The policy that plays the rounds the actor does not learn: round 0 (``round_zero``) or every round after it
-    (``later_rounds``), as part of the environment's dynamics."""
-
-    policy: Policy
-    round_zero: bool
-
-    def plays(self, round_: int) -> bool:
-        return (round_ == 0) == self.round_zero
-
-    def with_actor(self, bidder: Policy) -> Policy:
-        """The actor as it plays, with its partner (what its checkpoint loads as)."""
-        return with_partner(bidder, self.policy, self.round_zero)
-
-
-class Group:
-    """The env copies of one mixture entry (one size), stepped together; rewards in units of c̄ · N."""
-
-    def __init__(self, entry: Mapping[str, Any], env_overrides: Mapping[str, Any], max_cycles: int,
-                 first_seed: int, partner: Partner | None = None) -> None:
-        self.label = str(entry.get("label") or entry["scenario"])
-        self.partner = partner
-        self.from_steps = int(entry.get("from_steps", 0))
-        config = resolve_config(entry["scenario"], **dict(entry.get("overrides") or {}))
-        self.env_kwargs = {"scenario": config, **env_overrides}
-        self.reward_scale = float(config.reward) * config.n_agents
-        self.envs = [TaskAllocEnv(**self.env_kwargs, max_cycles=max_cycles, reward_scale=self.reward_scale)
-                     for _ in range(int(entry.get("copies", 1)))]
-        env = self.envs[0]
-        self.agents = list(env.possible_agents)
-        self.n_agents, self.n_tasks = config.n_agents, config.n_tasks
-        self.layout = env.observation_layout
-        self.n_equipment = self.layout.n_equipment
-        self.first_seed = first_seed
-        self.scores: list[float] = []
-        self.obs = self.masks = self.states = np.empty(0)
-
-    def reset(self) -> None:
-        """Copy i starts from seed ``first_seed + i``; later episodes continue that copy's generator."""
-        rows = [self._observe(env, self._begin(env, self.first_seed + i)) for i, env in enumerate(self.envs)]
-        self.obs, self.masks, self.states = (np.stack(x) for x in zip(*rows))
-
-    def _begin(self, env: TaskAllocEnv, seed: int | None = None) -> Mapping[str, Any]:
-        """A new episode's observations where the actor first acts: at the start, or after its partner's round 0
-        (an episode that ends within it counts as played and is followed by the next)."""
-        obs, infos = env.reset(seed=seed)
-        if self.partner is None:
-            return obs
-        self.partner.policy.start(env)
-        obs, infos, _, _ = self._partner_plays(env, obs, infos)
-        if not env.agents:
-            self.scores.append(infos[self.agents[0]]["score"])
-            return self._begin(env)
-        return obs
-
-    def _partner_plays(self, env: TaskAllocEnv, obs: Mapping[str, Any], infos: Mapping[str, Any]
-                       ) -> tuple[Mapping[str, Any], Mapping[str, Any], float, bool]:
-        """The partner's steps while it plays the current round: the observations and infos where it stops, the
-        team reward it earned, and whether max_cycles cut the episode there."""
-        gain, cut = 0.0, False
-        while env.agents and self.partner.plays(infos[self.agents[0]]["round"]):
-            obs, reward, terminated, truncated, infos = env.step(self.partner.policy.act(obs, infos))
-            gain += reward[self.agents[0]]
-            cut = all(truncated.values()) and not all(terminated.values())
-        return obs, infos, gain, cut
-
-    def _observe(self, env: TaskAllocEnv, obs: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return (*stack_observations(obs, self.agents), env.state())
-
-    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[np.ndarray | None]]:
-        """Step every copy (and the partner's rounds that follow); (rewards (C,), episode ends (C,), the last state
-        of each copy cut by max_cycles)."""
-        rewards, dones, cut = np.zeros(len(self.envs)), np.zeros(len(self.envs), dtype=bool), []
-        for i, env in enumerate(self.envs):
-            obs, reward, terminated, truncated, infos = env.step(dict(zip(self.agents, actions[i].tolist())))
-            rewards[i] = reward[self.agents[0]]
-            ended_by_limit = all(truncated.values()) and not all(terminated.values())
-            if env.agents and self.partner is not None:     # the rest may be the partner's (later_rounds)
-                obs, infos, gain, ended_by_limit = self._partner_plays(env, obs, infos)
-                rewards[i] += gain
-            cut.append(env.state() if ended_by_limit else None)
-            if not env.agents:
-                dones[i] = True
-                self.scores.append(infos[self.agents[0]]["score"])
-                obs = self._begin(env)
-            self.obs[i], self.masks[i], self.states[i] = self._observe(env, obs)
-        return rewards, dones, cut
-
-
 # -- networks ---------------------------------------------------------------------------------------------------------
 class ActorSpec(Protocol):
-    """The config fields an actor is built from (``MappoConfig``, ``taskalloc.training.distil.DistilConfig``,
-    ``taskalloc.training.planner.PlannerConfig``)."""
+    """The config fields an actor is built from (``MappoConfig``, and research's distillation and planner configs)."""
 
     actor: str
     hidden: int
@@ -444,7 +338,7 @@ class Evaluator:
         return ratios
 
 
-def load_weights(model: ActorCritic, source: str) -> list[str]:
+def load_weights(model: ActorCritic, source: str, hook: PartnerHook | None = None) -> list[str]:
     """Start from a checkpoint's actor weights and, when its folder holds one, its critic (``init_from``)."""
     json_path = Path(str(resolve(source)))
     json_path = json_path / "model.json" if json_path.is_dir() else json_path.with_suffix(".json")
@@ -458,13 +352,8 @@ def load_weights(model: ActorCritic, source: str) -> list[str]:
         except RuntimeError as exc:
             raise ConfigError(f"init_from {source}: its {name} does not fit this run's networks (actor, hidden, "
                               f"heads, layers): {str(exc).splitlines()[0]}") from None
-    if source_checkpoint.meta.get("algo") == PLANNER:
-        # a planner fitted its bid logits as log-odds and never its pass logit: with the pass logit at 0 the arg-max
-        # of the actor's policy is the planner's rule at threshold ½ (bid the likeliest task while p ≥ ½)
-        pass_layer = model.actor.output_layers()[-1]
-        with th.no_grad():
-            pass_layer.weight.zero_()
-            pass_layer.bias.zero_()
+    if hook is not None:
+        hook.init_actor(model.actor, source_checkpoint.meta)
     return [name for name, _, _ in states]
 
 
@@ -477,45 +366,27 @@ def as_played(bidder: LearnedPolicy, partner: Partner | None) -> Policy:
     return bidder if partner is None else partner.with_actor(bidder)
 
 
-def load_partner(cfg: MappoConfig) -> Partner | None:
-    """The policy of ``round_zero`` (a round-0 planner) or ``later_rounds`` (any policy), checked: it plays with
-    the run's protocol options."""
-    if cfg.round_zero is not None:
-        field, policy = "round_zero", planner_pair(cfg.round_zero, "training field 'round_zero':").first
-    elif cfg.later_rounds is not None:
-        field = "later_rounds"
-        try:
-            policy = make_policy(cfg.later_rounds)
-        except ValueError as exc:       # a CheckpointError is a ConfigError already
-            raise ConfigError(f"training field 'later_rounds': {exc}") from None
-    else:
-        return None
-    clash = {k: v for k, v in policy.env_overrides.items() if k not in cfg.env_overrides or cfg.env_overrides[k] != v}
-    if clash:
-        raise ConfigError(f"training field '{field}': {getattr(cfg, field)} plays with {clash}; the run's "
-                          f"env_overrides {cfg.env_overrides} must hold them")
-    return Partner(policy, round_zero=field == "round_zero")
-
-
 def save_actor(stem: Path, actor: nn.Module, group: Group, cfg: MappoConfig, meta: Mapping[str, Any]) -> Path:
     """The actor as a checkpoint (``taskalloc.policies.checkpoint``): what ``learned:<path>`` loads."""
     return checkpoint.save(stem, actor, group.layout.own_names, group.layout.task_names, cfg.env_overrides, meta)
 
 
 # -- the run -----------------------------------------------------------------------------------------------------------
-def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
-    cfg = load_config(argv)
+def main(argv: Sequence[str] | None = None, hook: PartnerHook | None = None) -> dict[str, Any]:
+    """Train; ``hook`` (optional) supplies a partner and its config fields (see the module docstring)."""
+    cfg = load_config(argv, hook)
     out_dir = prepare_out_dir(cfg.out_dir, cfg.overwrite)
     (out_dir / "config.yaml").write_text(yaml.safe_dump(dataclasses.asdict(cfg), sort_keys=False))
     th.set_num_threads(cfg.torch_threads)
     th.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
-    summary: dict[str, Any] = {"command": " ".join(["taskalloc mappo", *(argv or sys.argv[1:])]),
+    summary: dict[str, Any] = {"command": " ".join([hook.prog if hook else "taskalloc mappo",
+                                                    *(argv or sys.argv[1:])]),
                                "cpu_count": os.cpu_count(), "load_average_at_start": round(os.getloadavg()[0], 2)}
     t_start, cpu_start = time.perf_counter(), time.process_time()
 
     # -- environments: one group of copies per mixture entry ----------------------------------------------------------
-    groups, first, partner = [], cfg.seed * 1000, load_partner(cfg)
+    groups, first, partner = [], cfg.seed * 1000, hook.partner(cfg) if hook is not None else None
     for entry in cfg.mixture:
         groups.append(Group(entry, cfg.env_overrides, cfg.max_cycles, first, partner))
         first += len(groups[-1].envs)
@@ -531,7 +402,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     actor = make_actor(cfg, layout.own_size, layout.task_size)
     model = ActorCritic(actor, StateCritic(layout.n_equipment, cfg.hidden, cfg.heads))
     if cfg.init_from:
-        summary["init_from"] = load_weights(model, cfg.init_from)
+        summary["init_from"] = load_weights(model, cfg.init_from, hook)
     optimizer = th.optim.Adam(model.parameters(), lr=cfg.learning_rate, eps=1e-5)
     summary["parameters"] = {"actor": count_parameters(model.actor), "critic": count_parameters(model.critic)}
     evaluator = Evaluator(groups, cfg, out_dir / "eval.csv")
@@ -574,8 +445,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     save_actor(out_dir / "model", model.actor, groups[0], cfg,
                {"name": cfg.name, "algo": "mappo", "seed": cfg.seed, "steps": steps,
                 "mixture": [g.label for g in groups], "init_from": cfg.init_from,
-                **({"round_zero": cfg.round_zero} if cfg.round_zero else {}),
-                **({"then": cfg.later_rounds} if cfg.later_rounds else {})})
+                **(partner.meta if partner is not None else {})})
     save_file({k: v.contiguous() for k, v in model.critic.state_dict().items()}, str(out_dir / CRITIC_FILE))
     summary.update(steps=steps, env_steps=env_steps, updates=update_i, train_seconds=round(seconds, 1),
                    agent_steps_per_second=round(steps / seconds, 1) if seconds else None,
