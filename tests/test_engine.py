@@ -1,0 +1,86 @@
+"""The action codec (``taskalloc_env.actions``) and the step engine (``taskalloc_env.engine``): every action round-trips
+cell by cell, the masks follow the rule the observation documents, and the env and the direct solver step alike."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from taskalloc_env import TaskAllocEnv
+from taskalloc_env.actions import (
+    PASS,
+    ActionKind,
+    bid_columns,
+    decode,
+    decode_array,
+    describe,
+    encode_bid,
+    encode_quit,
+    n_actions,
+    quit_columns,
+)
+from taskalloc_env.engine import StepEngine, action_masks
+
+
+@pytest.mark.parametrize("m", [1, 2, 5, 13])
+def test_every_action_round_trips(m):
+    """Each of the 1 + 2M actions decodes to one (kind, task) that encodes back to it; the columns of a kind hold
+    its tasks in order; the vectorised decoder agrees cell by cell."""
+    seen = set()
+    for action in range(n_actions(m)):
+        kind, task = decode(action, m)
+        seen.add((kind, task))
+        if kind is ActionKind.PASS:
+            assert action == PASS and task == -1 and describe(action, m) == "pass"
+        elif kind is ActionKind.BID:
+            assert 0 <= task < m and encode_bid(task) == action and describe(action, m) == f"bid on task {task}"
+        else:
+            assert 0 <= task < m and encode_quit(task, m) == action and describe(action, m) == f"quit task {task}"
+    assert len(seen) == n_actions(m)
+    actions = np.arange(n_actions(m))
+    np.testing.assert_array_equal(actions[bid_columns(m)], encode_bid(np.arange(m)))
+    np.testing.assert_array_equal(actions[quit_columns(m)], encode_quit(np.arange(m), m))
+    kinds, tasks = decode_array(actions.reshape(1, -1), m)
+    assert kinds.shape == tasks.shape == (1, n_actions(m))
+    assert [(ActionKind(k), t) for k, t in zip(kinds[0].tolist(), tasks[0].tolist())] == \
+        [decode(a, m) for a in actions.tolist()]
+
+
+def test_masks_allow_pass_and_only_an_acting_agent_s_bids_and_quits():
+    """``action_masks``, cell by cell: pass always; bid j iff the bid is valid and the agent has not passed; quit j
+    iff the quit is allowed and the agent has not passed."""
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        n, m = rng.integers(1, 6, size=2)
+        can_bid, can_quit, passed = rng.random((n, m)) < 0.5, rng.random((n, m)) < 0.5, rng.random(n) < 0.4
+        mask = action_masks(can_bid, can_quit, passed)
+        assert mask.dtype == np.int8 and mask.shape == (n, n_actions(m))
+        for i in range(n):
+            assert mask[i, PASS] == 1
+            for j in range(m):
+                assert mask[i, encode_bid(j)] == (can_bid[i, j] and not passed[i])
+                assert mask[i, encode_quit(j, m)] == (can_quit[i, j] and not passed[i])
+
+
+@pytest.mark.parametrize("consensus", ["sync", "every_step", "acbba"])
+def test_the_env_hands_out_the_engine_s_masks_and_steps_through_it(consensus):
+    """The env's masks are the engine's, and a step the env takes is the engine's step: a second engine on a copy of
+    the protocol, given the same decisions, reaches the same tables, round and masks."""
+    import copy
+
+    env = TaskAllocEnv(n_agents=4, n_tasks=6, agents_per_task=[1, 2], consensus=consensus, task_quitting=True,
+                       delta=0)
+    obs, _ = env.reset(seed=3)
+    rng = np.random.default_rng(3)
+    while env.agents:
+        engine = StepEngine(copy.deepcopy(env.protocol))
+        engine.passed = env._engine.passed.copy()
+        engine.steps = env._engine.steps
+        for a in env.agents:
+            np.testing.assert_array_equal(obs[a]["action_mask"], engine.masks()[env.agent_index[a]])
+        actions = {a: int(rng.choice(np.flatnonzero(obs[a]["action_mask"]))) for a in env.agents}
+        engine.apply((env.agent_index[a], action) for a, action in actions.items())
+        obs, *_ = env.step(actions)
+        assert engine.protocol.round == env.protocol.round
+        assert engine.protocol.knowledge.groups == env.protocol.knowledge.groups
+        np.testing.assert_array_equal(engine.passed, env._engine.passed)
