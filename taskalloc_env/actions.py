@@ -25,6 +25,9 @@ class ActionKind(IntEnum):
     QUIT = 2
 
 
+_PASS, _BID, _QUIT = ActionKind.PASS, ActionKind.BID, ActionKind.QUIT     # an enum member lookup costs a call
+
+
 def n_actions(n_tasks: int) -> int:
     """The size of the action space (and of a mask row): 1 + 2M."""
     return 1 + 2 * n_tasks
@@ -53,10 +56,10 @@ def quit_columns(n_tasks: int) -> slice:
 def decode(action: int, n_tasks: int) -> tuple[ActionKind, int]:
     """(kind, task) of a valid action ``0 ≤ action < 1 + 2M``; the task of a pass is −1."""
     if action == PASS:
-        return ActionKind.PASS, -1
+        return _PASS, -1
     if action <= n_tasks:
-        return ActionKind.BID, action - 1
-    return ActionKind.QUIT, action - n_tasks - 1
+        return _BID, action - 1
+    return _QUIT, action - n_tasks - 1
 
 
 def decode_array(actions: np.ndarray, n_tasks: int) -> tuple[np.ndarray, np.ndarray]:

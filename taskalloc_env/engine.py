@@ -14,16 +14,31 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from taskalloc_env.actions import ActionKind, bid_columns, decode, n_actions, quit_columns
+from taskalloc_env import kernels
+from taskalloc_env.actions import PASS, ActionKind, bid_columns, decode, n_actions, quit_columns
+from taskalloc_env.kernels.masks import fill_masks
 from taskalloc_env.protocol import Protocol
+
+_PASS, _BID = ActionKind.PASS, ActionKind.BID         # looked up once: the loop of ``apply`` compares to them
 
 
 def action_masks(can_bid: np.ndarray, can_quit: np.ndarray, passed: np.ndarray) -> np.ndarray:
     """(N, 1 + 2M) int8: pass always; the valid bids and the allowed quits of every agent that has not ``passed``
-    (a passed agent may only pass until the round ends; under ``acbba``, until its builder is ready)."""
+    (a passed agent may only pass until the round ends; under ``acbba``, until its builder is ready). Compiled
+    (``kernels.masks.fill_masks``) when numba is there, else ``action_masks_reference``."""
+    if not kernels.COMPILED:
+        return action_masks_reference(can_bid, can_quit, passed)
     n, m = can_bid.shape
     mask = np.empty((n, n_actions(m)), dtype=np.int8)
-    mask[:, 0] = 1
+    fill_masks(can_bid, can_quit, passed, mask)
+    return mask
+
+
+def action_masks_reference(can_bid: np.ndarray, can_quit: np.ndarray, passed: np.ndarray) -> np.ndarray:
+    """``action_masks`` in numpy (the reference of ``kernels.masks.fill_masks``)."""
+    n, m = can_bid.shape
+    mask = np.empty((n, n_actions(m)), dtype=np.int8)
+    mask[:, PASS] = 1
     acting = ~passed[:, None]
     np.logical_and(can_bid, acting, out=mask[:, bid_columns(m)])
     np.logical_and(can_quit, acting, out=mask[:, quit_columns(m)])
@@ -65,11 +80,11 @@ class StepEngine:
         ready = protocol.ready if self.asynchronous else None
         for i, action in decisions:
             kind, task = decode(action, m)
-            if kind is ActionKind.PASS:
+            if kind is _PASS:
                 if ready is not None and ready[i]:
                     protocol.finish(i)                      # the build completes: rebroadcast (Johnson l. 763)
                 passed[i] = True
-            elif kind is ActionKind.BID:
+            elif kind is _BID:
                 protocol.bid(i, task, view=view)
                 passed[i] = False
             else:

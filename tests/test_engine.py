@@ -19,7 +19,7 @@ from taskalloc_env.actions import (
     n_actions,
     quit_columns,
 )
-from taskalloc_env.engine import StepEngine, action_masks
+from taskalloc_env.engine import StepEngine, action_masks, action_masks_reference
 
 
 @pytest.mark.parametrize("m", [1, 2, 5, 13])
@@ -47,14 +47,15 @@ def test_every_action_round_trips(m):
 
 
 def test_masks_allow_pass_and_only_an_acting_agent_s_bids_and_quits():
-    """``action_masks``, cell by cell: pass always; bid j iff the bid is valid and the agent has not passed; quit j
-    iff the quit is allowed and the agent has not passed."""
+    """``action_masks`` (compiled) and its numpy reference, cell by cell: pass always; bid j iff the bid is valid
+    and the agent has not passed; quit j iff the quit is allowed and the agent has not passed."""
     rng = np.random.default_rng(0)
     for _ in range(20):
         n, m = rng.integers(1, 6, size=2)
         can_bid, can_quit, passed = rng.random((n, m)) < 0.5, rng.random((n, m)) < 0.5, rng.random(n) < 0.4
         mask = action_masks(can_bid, can_quit, passed)
         assert mask.dtype == np.int8 and mask.shape == (n, n_actions(m))
+        assert mask.tobytes() == action_masks_reference(can_bid, can_quit, passed).tobytes(), "kernel = reference"
         for i in range(n):
             assert mask[i, PASS] == 1
             for j in range(m):
