@@ -85,3 +85,27 @@ def test_the_env_hands_out_the_engine_s_masks_and_steps_through_it(consensus):
         assert engine.protocol.round == env.protocol.round
         assert engine.protocol.knowledge.groups == env.protocol.knowledge.groups
         np.testing.assert_array_equal(engine.passed, env._engine.passed)
+
+
+@pytest.mark.parametrize("consensus", ["sync", "every_step", "acbba"])
+def test_a_round_ends_when_its_consensus_mode_says(consensus):
+    """``sync``: the round ends once every agent has passed, and a passed agent may only pass until then (thesis
+    §3.2.2–3.2.3); ``every_step``: after every step; ``acbba``: every step is one tick (Johnson §4.1)."""
+    env = TaskAllocEnv(n_agents=3, n_tasks=6, agents_per_task=1, consensus=consensus)
+    env.reset(seed=2)
+    engine = env._engine
+    if consensus == "acbba":                # no builder is ready at tick 0 (build_ticks ≥ 1): everyone passes
+        for tick in (1, 2):
+            engine.apply([(i, PASS) for i in range(3)])
+            assert env.protocol.round == engine.steps == tick
+        return
+    bidder = int(engine.acting()[0])
+    bids = np.flatnonzero(engine.masks()[bidder, bid_columns(6)])
+    assert bids.size, "the first acting agent has a bid"
+    engine.apply([(i, encode_bid(int(bids[0])) if i == bidder else PASS) for i in engine.acting().tolist()])
+    if consensus == "sync":
+        assert env.protocol.round == 0 and engine.passed.sum() == 2 and not engine.passed[bidder]
+        assert engine.masks()[engine.passed, 1:].sum() == 0, "a passed agent may only pass"
+        engine.apply([(bidder, PASS)])
+    assert env.protocol.round == 1 and engine.steps == (2 if consensus == "sync" else 1)
+    assert not engine.passed.any(), "a new round: every live agent may act again"
