@@ -54,6 +54,8 @@ class StepEngine:
         self.every_step = protocol.cfg.consensus == "every_step"
         self.steps = 0
         self.passed = self.waiting()
+        m = protocol.scenario.n_tasks
+        self._decoded = [decode(action, m) for action in range(n_actions(m))]   # a lookup costs less than a call
 
     def waiting(self) -> np.ndarray:
         """(N,) agents that may only pass: none at the start of a synchronous round; under ``acbba`` every agent whose
@@ -75,11 +77,11 @@ class StepEngine:
         then end the round (tick) if it is due."""
         protocol = self.protocol
         view = protocol.view()
-        m = protocol.scenario.n_tasks
+        decoded = self._decoded
         passed = self.passed
         ready = protocol.ready if self.asynchronous else None
         for i, action in decisions:
-            kind, task = decode(action, m)
+            kind, task = decoded[action]
             if kind is _PASS:
                 if ready is not None and ready[i]:
                     protocol.finish(i)                      # the build completes: rebroadcast (Johnson l. 763)
