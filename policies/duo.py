@@ -36,6 +36,7 @@ import numpy as np
 
 from taskalloc.policies.rollout import rollout
 from taskalloc.policies.scripted import CBBAPolicy
+from taskalloc_env.actions import bid_columns
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import GENERATION_FIELDS, TaskAllocConfig, to_mapping
 from taskalloc_env.env import TaskAllocEnv
@@ -103,7 +104,7 @@ class DuoCBBAPolicy(CBBAPolicy):
         """The action mask with (4.1) applied: no bid on the other part of a held task."""
         mask = np.array(obs["action_mask"], copy=True)
         held = self.layout.task_feature(obs["observation"], "in_bundle") > 0.5
-        mask[1: self.n_tasks + 1] &= ~held[self.partner]
+        mask[bid_columns(self.n_tasks)] &= ~held[self.partner]
         return mask
 
     def act(self, observations: Mapping[str, Mapping[str, np.ndarray]],

@@ -1,12 +1,11 @@
 """Solve an instance with a scripted consensus policy through the protocol directly, without the environment.
 
-``solve(scenario, config, "cbgabi")`` makes exactly the calls an episode of ``TaskAllocEnv`` makes — every step each
-agent still in the bundle phase decides from the same bid view, bids and quits are applied in agent order, the round
-ends when every agent has passed (``sync``) or after every step (``every_step``) — and the policy decides with the
-same rule on the same values (``CBGAPolicy.choose`` on the observation's columns, in the env's ``dtype``). It skips
-what an episode computes only for its caller: observations, rewards and infos. So it returns the same ``Allocation``,
-counters included, as ``rollout``; the experiments use it for the scripted baselines (a test compares the two on many
-seeds).
+``solve(scenario, config, "cbgabi")`` makes exactly the calls an episode of ``TaskAllocEnv`` makes — the same
+``taskalloc_env.engine.StepEngine`` steps the protocol, with the same action masks, from the decisions of every agent
+still in the bundle phase — and the policy decides with the same rule on the same values (``CBGAPolicy.choose`` on
+the observation's columns, in the env's ``dtype``). It skips what an episode computes only for its caller:
+observations, rewards and infos. So it returns the same ``Allocation``, counters included, as ``rollout``; the
+experiments use it for the scripted baselines (a test compares the two on many seeds).
 """
 
 from __future__ import annotations
@@ -17,11 +16,10 @@ from taskalloc.policies.registry import make_policy
 from taskalloc.policies.scripted import CBGAPolicy
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import TaskAllocConfig
+from taskalloc_env.engine import StepEngine
 from taskalloc_env.observation import Scales
 from taskalloc_env.protocol import Protocol
 from taskalloc_env.scenario import Scenario
-
-PASS = 0
 
 
 def solvable(config: TaskAllocConfig) -> bool:
@@ -44,34 +42,16 @@ def solve(scenario: Scenario, config: TaskAllocConfig, policy: str | CBGAPolicy,
     if config.stochastic:
         raise ValueError("the direct solver needs a protocol that draws nothing (perfect links, no Poisson pop-ups): "
                          "random draws come from the env's generator")
-    protocol = Protocol(scenario, config)
+    engine = StepEngine(Protocol(scenario, config))          # the env's step, without observations and rewards
+    protocol = engine.protocol
     unit, float_type = Scales.of(scenario).reward_unit, np.dtype(dtype)
-    m = scenario.n_tasks
-    passed = np.zeros(scenario.n_agents, dtype=bool)
-    masks = np.zeros((scenario.n_agents, 1 + 2 * m), dtype=bool)     # row i: agent i's action mask
-    masks[:, 0] = True
-    steps = 0
     while True:
         view = protocol.view()
-        masks[:, 1: m + 1] = view.can_bid
-        if config.task_quitting:            # otherwise no quit is ever allowed and those columns stay False
-            masks[:, m + 1:] = protocol.quit_options()
-        acting = np.flatnonzero(~passed)
-        mask = masks[acting]
+        acting = engine.acting()
+        mask = engine.masks()[acting].view(bool)
         # the rule reads only its own columns, as the observation gives them: divided by the unit, in ``dtype``
         columns = [(getattr(view, name)[acting] / unit).astype(float_type) for name in policy.columns]
-        for i, action in zip(acting.tolist(), policy.choose(mask, *columns).tolist()):
-            if action == PASS:
-                passed[i] = True
-            elif action <= m:
-                protocol.bid(i, action - 1, view=view)
-            else:
-                protocol.quit(i, action - m - 1)
-        steps += 1
-        if config.consensus == "every_step" or passed.all():
-            protocol.end_round()
-            passed = ~protocol.alive
-        if protocol.converged or (max_cycles is not None and steps >= max_cycles) \
-                or protocol.round >= protocol.max_rounds:
+        engine.apply(zip(acting.tolist(), policy.choose(mask, *columns).tolist()))
+        if any(engine.ended(max_cycles)):
             break
     return protocol.allocation()

@@ -25,6 +25,7 @@ import numpy as np
 from taskalloc.policies.base import Policy, stack_observations
 from taskalloc.policies.checkpoint import Checkpoint, CheckpointError, load
 from taskalloc_env import resources
+from taskalloc_env.actions import PASS, ActionKind, bid_columns, encode_bid, encode_quit, quit_columns
 from taskalloc_env.observation import FAULT_FEATURES, POPUP_FEATURES, TEAM_FEATURES, ObservationLayout
 
 # task features the environment adds only in some modes (a faulty network, pop-up tasks, team_features): a
@@ -154,11 +155,12 @@ def greedy_actions(logits: np.ndarray, probs: np.ndarray) -> np.ndarray:
     the two rules agree.
     """
     m = (logits.shape[1] - 1) // 2
-    kinds = np.stack([probs[:, 0], probs[:, 1: m + 1].sum(axis=1), probs[:, m + 1:].sum(axis=1)], axis=1)
+    bids, quits = bid_columns(m), quit_columns(m)
+    kinds = np.stack([probs[:, PASS], probs[:, bids].sum(axis=1), probs[:, quits].sum(axis=1)], axis=1)
     kind = kinds.argmax(axis=1)
-    bid = 1 + logits[:, 1: m + 1].argmax(axis=1)
-    quit_ = m + 1 + logits[:, m + 1:].argmax(axis=1)
-    return np.select([kind == 0, kind == 1], [0, bid], quit_)
+    bid = encode_bid(logits[:, bids].argmax(axis=1))
+    quit_ = encode_quit(logits[:, quits].argmax(axis=1), m)
+    return np.select([kind == ActionKind.PASS, kind == ActionKind.BID], [PASS, bid], quit_)
 
 
 def feature_columns(layout: ObservationLayout, own_features: tuple[str, ...], task_features: tuple[str, ...]

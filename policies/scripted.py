@@ -29,6 +29,7 @@ import numpy as np
 from taskalloc.policies.base import Policy, stack_observations
 from taskalloc.policies.greedy import greedy_actions
 from taskalloc_env import kernels
+from taskalloc_env.actions import PASS, bid_columns, encode_bid, encode_quit, quit_columns
 from taskalloc_env.observation import ObservationLayout
 
 TEAM_VALUES = ("net", "literal")
@@ -108,17 +109,17 @@ class CBGAPolicy(Policy):
                          displaced_bid: np.ndarray | None = None) -> np.ndarray:
         """``choose`` in numpy (the reference of ``taskalloc.policies.greedy.greedy_actions``)."""
         m = gain.shape[1]
-        valid = mask[:, 1: m + 1]
+        valid = mask[:, bid_columns(m)]
         value = gain
         if self.team_bidding:
             value = value + group_total
             if self.team_value == "net":
                 value = value - displaced_bid
-        actions = np.where(valid.any(axis=1), 1 + np.argmax(np.where(valid, value, -np.inf), axis=1), 0)
+        actions = np.where(valid.any(axis=1), encode_bid(np.argmax(np.where(valid, value, -np.inf), axis=1)), PASS)
         if self.task_quitting:
-            quits = mask[:, m + 1:]
+            quits = mask[:, quit_columns(m)]
             if quits.any():
-                actions = np.where(quits.any(axis=1), m + 1 + np.argmax(quits, axis=1), actions)
+                actions = np.where(quits.any(axis=1), encode_quit(np.argmax(quits, axis=1), m), actions)
         return actions
 
 

@@ -48,6 +48,7 @@ return equals ``evaluate().score / reward_scale``.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, ClassVar
@@ -57,16 +58,17 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
+from taskalloc_env.actions import PASS, ActionKind, decode, describe, n_actions
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.async_protocol import AsyncProtocol
 from taskalloc_env.config import TaskAllocConfig, episode_bound, max_required_agents, resolve_config
+from taskalloc_env.engine import StepEngine
 from taskalloc_env.errors import ConfigError, InvalidActionError
 from taskalloc_env.observation import ObservationBuilder, state_vector
 from taskalloc_env.protocol import Protocol, check_memory
 from taskalloc_env.render import ansi_table, figure, rgb_array
 from taskalloc_env.scenario import Scenario, generate, scenario_config
 
-PASS = 0
 INVALID_ACTION_MODES = ("noop", "raise")
 DTYPES = ("float32", "float64")
 _MISSING = object()                # an agent the action dict leaves out
@@ -96,7 +98,7 @@ class TaskAllocEnv(ParallelEnv):
             raise ConfigError(f"dtype {dtype!r} is not one of {DTYPES}")
         self.dtype = np.dtype(dtype)
         self.mask_in_infos = bool(mask_in_infos)
-        self.invalid_action_reasons: dict[str, str] = {}     # why each flagged action of the last step was refused
+        self.invalid_action_reasons: dict[Any, str] = {}     # why each flagged action (or key) of the last step failed
         if max_cycles is not None and (isinstance(max_cycles, bool) or not isinstance(max_cycles, int)
                                        or max_cycles < 1):
             raise ConfigError(f"max_cycles must be a positive integer or None, got {max_cycles!r}")
@@ -104,7 +106,7 @@ class TaskAllocEnv(ParallelEnv):
                 or not 0 < reward_scale < np.inf:
             raise ConfigError(f"reward_scale must be a finite number > 0, got {reward_scale!r}")
         self.render_mode = render_mode
-        self.render_path = Path(render_path) if render_path is not None else None
+        self.render_path = _checked_render_path(render_path)
         self.invalid_action = invalid_action
         self.reward_scale = float(reward_scale)
         n, m = self.config.n_agents, self.config.n_tasks
@@ -143,9 +145,9 @@ class TaskAllocEnv(ParallelEnv):
         self.observation_layout = builder.layout
         self._observation_space = spaces.Dict({
             "observation": builder.space(self.dtype),
-            "action_mask": spaces.Box(0, 1, (1 + 2 * m,), dtype=np.int8),
+            "action_mask": spaces.Box(0, 1, (n_actions(m),), dtype=np.int8),
         })
-        self._action_space = spaces.Discrete(1 + 2 * m)
+        self._action_space = spaces.Discrete(n_actions(m))
         state_size = len(state_vector(probe_protocol))
         self.state_space = spaces.Box(-np.inf, np.inf, (state_size,), dtype=self.dtype)
 
@@ -190,9 +192,8 @@ class TaskAllocEnv(ParallelEnv):
         protocol_rng = np.random.default_rng(self._np_random.integers(2**63)) if self.config.stochastic else None
         self._protocol = self._protocol_class(scenario, self.config, rng=protocol_rng)
         self._builder = ObservationBuilder(self._protocol, self._max_agents_per_task, self._max_rounds)
+        self._engine = StepEngine(self._protocol)
         self.agents = list(self.possible_agents)
-        self._passed = self._waiting()
-        self._steps = 0
         self._last_score = 0.0
         self._done = False
         observations = self._observations()
@@ -211,32 +212,11 @@ class TaskAllocEnv(ParallelEnv):
         decisions = self._read_actions(actions, flags)
         protocol.counters.invalid_actions += len(flags)
         self.invalid_action_reasons = flags
-        view = protocol.view()
-        m = self.config.n_tasks
-        for i, action in decisions:
-            if action == PASS:
-                if self.config.asynchronous and protocol.ready[i]:
-                    protocol.finish(i)                      # the build completes: rebroadcast
-                self._passed[i] = True
-            elif action <= m:
-                protocol.bid(i, action - 1, view=view)
-                self._passed[i] = False
-            else:
-                protocol.quit(i, action - m - 1)
-                self._passed[i] = False
-        self._steps += 1
-        if self.config.asynchronous:
-            protocol.advance()
-            self._passed = self._waiting()
-        elif self.config.consensus == "every_step" or bool(self._passed.all()):
-            protocol.end_round()
-            self._passed[:] = ~protocol.alive                  # a failed agent takes no further part
+        self._engine.apply(decisions)
         score = protocol.score().score
         reward = (score - self._last_score) / self.reward_scale
         self._last_score = score
-        terminated = protocol.converged
-        truncated = not terminated and (
-            self._steps >= self.max_cycles or protocol.round >= protocol.max_rounds)
+        terminated, truncated = self._engine.ended(self.max_cycles)
         agents = list(self.agents)
         observations = self._observations()
         alive, index = protocol.alive.tolist(), self.agent_index
@@ -255,24 +235,16 @@ class TaskAllocEnv(ParallelEnv):
             self.render()
         return observations, rewards, terminations, truncations, infos
 
-    def _waiting(self) -> np.ndarray:
-        """(N,) agents that may only pass: none at the start of a synchronous round; under ``acbba`` every agent whose
-        bundle builder is not ready this tick."""
-        if self.config.asynchronous:
-            return ~self.protocol.ready
-        return np.zeros(len(self.possible_agents), dtype=bool)
-
     def _read_actions(self, actions: Mapping[str, Any], flags: dict[str, str]) -> list[tuple[int, int]]:
         """Validate the action dict against the live agents and their masks; apply ``invalid_action``."""
         if not isinstance(actions, Mapping):
             raise InvalidActionError(f"actions must be a dict agent -> action, got {type(actions).__name__}")
         unknown = [] if actions.keys() <= set(self.agents) else [a for a in actions if a not in self.agents]
-        if unknown:
-            message = f"actions for unknown or finished agents {unknown}; live agents: {self.agents}"
+        for key in unknown:                     # flagged under its own key: the live agents' actions still count
+            message = f"action for {_shown(key)}, which is not a live agent; live agents: {self.agents}"
             if self.invalid_action == "raise":
                 raise InvalidActionError(message)
-            for a in self.agents:
-                flags[a] = message
+            flags[key] = message
         masks = self._masks                     # the masks handed out with the last observations
         allowed = self._allowed                 # the same masks as lists: a plain int is checked in two lookups
         decisions = []
@@ -306,39 +278,42 @@ class TaskAllocEnv(ParallelEnv):
         return checked
 
     def _check_action(self, agent: str, raw: Any, mask: np.ndarray) -> tuple[int | None, str | None]:
-        value = raw.item() if isinstance(raw, np.ndarray) and raw.size == 1 else raw   # a 0-d or 1-element array
-        try:
-            action = int(value)
-        except (TypeError, ValueError, OverflowError):
-            return None, f"action {raw!r} of {agent} is not an integer"
-        if isinstance(value, bool) or action != value or not 0 <= action < len(mask):
-            return None, f"action {raw!r} of {agent} is outside Discrete({len(mask)})"
+        """``raw`` as an int and no problem if ``action_space.contains`` accepts it (a Python or NumPy integer, a 0-d
+        integer array) and the mask allows it; else None and why not. A bool is refused although ``Discrete`` takes
+        Python's ``True`` for 1 (bool subclasses int; ours: a flag is never an action, as ``np.bool_`` is not)."""
+        n = len(mask)
+        if isinstance(raw, (bool, np.bool_)) or not _integer(raw):
+            return None, f"action {_shown(raw)} of {agent} is not an integer scalar (Discrete({n}) takes an int, " \
+                         f"a NumPy integer or a 0-d integer array)"
+        if not self._action_space.contains(raw):
+            return None, f"action {_shown(raw)} of {agent} is outside Discrete({n})"
+        action = int(raw)
         if not mask[action]:
             return None, f"action {action} ({self.describe_action(action)}) of {agent} is not allowed by its mask: " \
                          f"{self._why_masked(agent, action)}"
         return action, None
 
     def _why_masked(self, agent: str, action: int) -> str:
-        i, m = self.agent_index[agent], self.config.n_tasks
-        if self._passed[i] and self.config.asynchronous:
+        i = self.agent_index[agent]
+        passed = self._engine.passed[i]
+        if passed and self.config.asynchronous:
             return "the agent's bundle builder is not ready this tick (it has no news, or its build is still running)"
-        if self._passed[i]:
+        if passed:
             return "the agent passed this round and may only pass until the round ends"
-        if action <= m:
-            return self.protocol.explain_bid(i, action - 1)
+        kind, task = decode(action, self.config.n_tasks)
+        if kind is ActionKind.BID:
+            return self.protocol.explain_bid(i, task)
         return "quitting needs task_quitting on, L_j > 1, membership, an incomplete group, no earlier quit, " \
                f"and T − H > delta = {self.config.delta}"
 
     def describe_action(self, action: int) -> str:
         """``pass``, ``bid on task j`` or ``quit task j``."""
-        m = self.config.n_tasks
-        if action == PASS:
-            return "pass"
-        return f"bid on task {action - 1}" if action <= m else f"quit task {action - m - 1}"
+        return describe(action, self.config.n_tasks)
 
     # -- outputs ---------------------------------------------------------------------------------------------------
     def _observations(self) -> dict[str, dict[str, np.ndarray]]:
-        obs, self._masks = self._builder.observe(self.protocol, self._passed, self.dtype)
+        obs = self._builder.observe(self.protocol, self._engine.passed, self.dtype)
+        self._masks = self._engine.masks()
         self._allowed = self._masks.tolist()
         handed = self._masks.copy()             # the caller's masks: editing one leaves the env's checks alone
         index = self.agent_index
@@ -354,7 +329,7 @@ class TaskAllocEnv(ParallelEnv):
         asynchronous = self.config.asynchronous
         if asynchronous:                                 # Johnson §4.1.3: each agent declares its own convergence
             declared, declared_at = p.agents_locally_converged, p.local_ticks
-        passed = self._passed.tolist()
+        passed = self._engine.passed.tolist()
         infos = {}
         for a in self.agents:
             i = self.agent_index[a]
@@ -401,6 +376,46 @@ class TaskAllocEnv(ParallelEnv):
             import matplotlib.pyplot as plt
             plt.close(self._window)
             self._window = None
+
+
+def _checked_render_path(render_path: str | Path | None) -> Path | None:
+    """``render_path`` as a Path, refused before any episode when matplotlib could not save a figure there."""
+    if render_path is None:
+        return None
+    if not isinstance(render_path, (str, Path)):
+        raise ConfigError(f"render_path must be a path or None, got {type(render_path).__name__}")
+    path = Path(render_path)
+    parent = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise ConfigError(f"render_path {str(path)!r} is a directory; give a file name such as allocation.png")
+    if not parent.is_dir():
+        raise ConfigError(f"render_path {str(path)!r}: the directory {str(parent)!r} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise ConfigError(f"render_path {str(path)!r}: the directory {str(parent)!r} is not writable")
+    if path.suffix:
+        from matplotlib.backend_bases import FigureCanvasBase
+
+        formats = FigureCanvasBase.get_supported_filetypes()
+        if path.suffix[1:].lower() not in formats:
+            raise ConfigError(f"render_path {str(path)!r}: matplotlib saves {', '.join(sorted(formats))}, "
+                              f"not {path.suffix!r}")
+    return path
+
+
+def _integer(raw: Any) -> bool:
+    """Whether ``raw`` is an integer scalar in ``Discrete.contains``'s sense: an int, or a NumPy integer of shape ()."""
+    if isinstance(raw, int):
+        return True
+    return isinstance(raw, (np.generic, np.ndarray)) and np.issubdtype(raw.dtype, np.integer) and raw.shape == ()
+
+
+def _shown(value: Any) -> str:
+    """``value`` for a one-line message: its repr, or its type and shape when that is long or spans lines."""
+    text = repr(value)
+    if "\n" not in text and len(text) <= 60:
+        return text
+    shape = getattr(value, "shape", None)
+    return f"{type(value).__name__}{f' of shape {shape}' if shape is not None else ''}"
 
 
 def _interactive_backend() -> bool:

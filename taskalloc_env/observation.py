@@ -174,9 +174,24 @@ class ObservationBuilder:
         self._columns = {name: c for c, name in enumerate(self.layout.task_names)}
         self._kernel_columns = np.array([self._columns[name] for name in KERNEL_COLUMNS], dtype=np.int64)
         self._silence, self._popups = "member_silence" in self._columns, "released" in self._columns
-        self._tasks = self._buffer[:, self.layout.own_size:].reshape(s.n_agents, s.n_tasks, self.layout.task_size)
+        self._tasks = self._task_block()
         # with pop-up tasks a hidden task's block is zeroed, its fixed columns too: kept to restore on release
         self._static_tasks = self._tasks.copy() if protocol.cfg.popup_tasks else None
+
+    def _task_block(self) -> np.ndarray:
+        """(N, M, F) the task features: a view into ``_buffer``, which every write goes through."""
+        n_agents = len(self._buffer)
+        return self._buffer[:, self.layout.own_size:].reshape(n_agents, self.layout.n_tasks, self.layout.task_size)
+
+    def __getstate__(self) -> dict:
+        """A copy or pickle keeps the buffer only: an array view is copied on its own, apart from its base."""
+        state = dict(self.__dict__)
+        del state["_tasks"]
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._tasks = self._task_block()
 
     def space(self, dtype: np.dtype) -> spaces.Box:
         """The observation space (built once per env; its bounds are not recomputed at every reset)."""
@@ -216,10 +231,9 @@ class ObservationBuilder:
                 nearest[i] = distance[others].min(axis=0)
         return sooner / s.n_agents, np.minimum(nearest / self.scales.diagonal, RELATIVE_BOUND)
 
-    def observe(self, protocol: Protocol, passed: np.ndarray, dtype: np.dtype | type = np.float64
-                ) -> tuple[np.ndarray, np.ndarray]:
-        """(N, D) observations in ``dtype`` (a new array) and (N, 1 + 2M) int8 action masks; row i uses only agent
-        i's table, path and flags. The per-step columns and the masks are written by the compiled
+    def observe(self, protocol: Protocol, passed: np.ndarray, dtype: np.dtype | type = np.float64) -> np.ndarray:
+        """(N, D) observations in ``dtype`` (a new array); row i uses only agent i's table, path and flags (the action
+        masks are ``engine.action_masks``). The per-step columns are written by the compiled
         ``kernels.observe.step_features`` when numba is there, else by ``observe_reference``'s numpy lines (the
         same values, bit for bit)."""
         if not kernels.COMPILED:
@@ -229,16 +243,15 @@ class ObservationBuilder:
         view = protocol.view()
         if self._static_tasks is not None:
             np.copyto(self._tasks, self._static_tasks)
-        mask = np.empty((s.n_agents, 1 + 2 * s.n_tasks), dtype=np.int8)
         step_features(self._tasks, self._kernel_columns, self.scales.reward_unit, view.gain, view.can_bid,
                       view.outbid, view.members, s.task_agents, view.lowest_bid, view.group_total, view.displaced_bid,
                       view.in_bundle, kn.groups.own, kn.quit, protocol.quit_options(), protocol.round,
                       kn.assigned_at, view.prereqs_met, self._buffer, self._bundle_sizes(kn),
-                      self._round_fraction(protocol), passed, mask)
-        return self._finish(protocol, dtype), mask
+                      self._round_fraction(protocol), passed)
+        return self._finish(protocol, dtype)
 
     def observe_reference(self, protocol: Protocol, passed: np.ndarray, dtype: np.dtype | type = np.float64
-                          ) -> tuple[np.ndarray, np.ndarray]:
+                          ) -> np.ndarray:
         """``observe`` in numpy (the reference of ``kernels.observe.step_features``)."""
         s = protocol.scenario
         kn = protocol.knowledge
@@ -266,13 +279,7 @@ class ObservationBuilder:
         own[:, BUNDLE_SIZE] = self._bundle_sizes(kn) / s.n_tasks
         own[:, ROUND] = self._round_fraction(protocol)
         own[:, PASSED] = passed
-        m = s.n_tasks
-        mask = np.zeros((s.n_agents, 1 + 2 * m), dtype=np.int8)
-        mask[:, 0] = 1
-        mask[:, 1: m + 1] = view.can_bid
-        mask[:, m + 1:] = protocol.quit_options()
-        mask[passed, 1:] = 0
-        return self._finish(protocol, dtype), mask
+        return self._finish(protocol, dtype)
 
     @staticmethod
     def _bundle_sizes(knowledge: LocalKnowledge) -> np.ndarray:

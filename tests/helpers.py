@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from taskalloc_env import Agent, Scenario, Task, TaskAllocEnv
+from taskalloc_env.actions import ActionKind, decode
 from taskalloc_env.cbba_table import NONE
 from taskalloc_env.groups import Equipment
 from taskalloc_env.knowledge import LocalKnowledge
@@ -197,9 +198,10 @@ def run_episode(env: TaskAllocEnv, policy, seed: int | None, *, check: Callable[
     while env.agents:
         actions = policy.act({a: observations[a] for a in env.agents}, infos)
         for a, act in actions.items():
-            if act > m:
-                quits[env.agent_index[a], act - m - 1] += 1
-            elif act > 0:
+            kind, task = decode(act, m)
+            if kind is ActionKind.QUIT:
+                quits[env.agent_index[a], task] += 1
+            elif kind is ActionKind.BID:
                 bids += 1
         observations, rewards, _, _, infos = env.step(actions)
         if rewards:

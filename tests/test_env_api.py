@@ -325,7 +325,7 @@ def test_invalid_actions_become_flagged_passes_with_noop():
         assert infos[a]["score"] == ref_infos[a]["score"]
     assert lenient.protocol.knowledge.groups == strict.protocol.knowledge.groups
     assert lenient.evaluate().counters.invalid_actions == 2 and strict.evaluate().counters.invalid_actions == 0
-    _, _, _, _, infos = lenient.step({"uav_0": float("inf"), "uav_1": np.array([0]), "uav_2": np.int64(0)})
+    _, _, _, _, infos = lenient.step({"uav_0": float("inf"), "uav_1": np.array(0), "uav_2": np.int64(0)})
     assert infos["uav_0"]["invalid_action"] and "not an integer" in lenient.invalid_action_reasons["uav_0"]
     assert not infos["uav_1"]["invalid_action"] and not infos["uav_2"]["invalid_action"]
 

@@ -25,6 +25,7 @@ from torch import nn
 from taskalloc.policies import checkpoint
 from taskalloc.policies.learned import LearnedPolicy, resolve
 from taskalloc.policies.networks import MlpActor, PoolingActor, PoolingEncoder, mlp, split_tasks
+from taskalloc_env.actions import n_actions as action_count
 from taskalloc_env.config import PROTOCOL_FIELDS
 from taskalloc_env.observation import TASK_FEATURES, ObservationLayout
 
@@ -55,7 +56,7 @@ class Body(nn.Module):
         if isinstance(self.pi, MlpActor):
             n_actions = self.pi.n_actions
         else:                      # pooling, any M: width = own + M·F + 1 + 2M
-            n_actions = 1 + 2 * ((features.shape[-1] - self.pi.own_size - 1) // (self.pi.task_size + 2))
+            n_actions = action_count((features.shape[-1] - self.pi.own_size - 1) // (self.pi.task_size + 2))
         return features[:, :-n_actions], features[:, -n_actions:] > 0.5
 
     def forward(self, features: th.Tensor) -> tuple[th.Tensor, th.Tensor]:

@@ -4,8 +4,8 @@
 * ``plan.plan_paths``: path timing and insertion gains (``scoring.ScoringModel.plan_reference``);
 * ``bids.bid_rows``: the bid view's rows, eligibility and the outbid test (``bidding.bid_view``);
 * ``score.paid_groups``: who is paid in a team score (``scoring.paid_groups_reference``);
-* ``observe.step_features``: the per-step columns of the observations and the action masks
-  (``ObservationBuilder.observe_reference``);
+* ``observe.step_features``: the per-step columns of the observations (``ObservationBuilder.observe_reference``);
+* ``masks.fill_masks``: every agent's action mask (``engine.action_masks_reference``);
 * ``table.set_member``: one write X_i[k][j] to the group table (``GroupTable.set_reference``);
 * ``table.joined_members``: the columns a member joined since a copy (``GroupTable.joined_reference``);
 * ``quits.quittable``: the quit conditions of thesis Alg 9 (``Protocol.quittable_reference``);

@@ -1,13 +1,12 @@
-"""The per-step part of every agent's observation and its action mask, compiled;
+"""The per-step part of every agent's observation, compiled;
 ``ObservationBuilder.observe_reference`` (numpy) is the reference.
 
 ``step_features`` writes, in one pass over (agent, task), the columns of the task block that change while bids are
 made (the bid view's gain, validity, outbid test, group figures and bundle flags; the agent's own bid, quit flags
-and quit timer; prerequisites; group completeness), the agent's own per-step features (bundle size, round, passed)
-and the action mask (pass, the valid bids and the allowed quits; a passed agent may only pass), with the same
-arithmetic as the reference: the same divisions in float64, integers and flags converted to float. The results are
-bit-identical (``tests/test_kernels.py``); the time saved is the twenty strided column writes and their temporaries
-per step.
+and quit timer; prerequisites; group completeness) and the agent's own per-step features (bundle size, round,
+passed), with the same arithmetic as the reference: the same divisions in float64, integers and flags converted to
+float. The results are bit-identical (``tests/test_kernels.py``); the time saved is the twenty strided column writes
+and their temporaries per step. The action masks are built in one place, ``engine.action_masks``.
 """
 
 from __future__ import annotations
@@ -29,14 +28,12 @@ def step_features(out: np.ndarray, columns: np.ndarray, unit: float, gain: np.nd
                   group_total: np.ndarray, displaced_bid: np.ndarray, in_bundle: np.ndarray, own_bid: np.ndarray,
                   quit: np.ndarray, can_quit: np.ndarray, now: int, assigned_at: np.ndarray,
                   prereqs_met: np.ndarray, own: np.ndarray, bundle_sizes: np.ndarray, round_fraction: float,
-                  passed: np.ndarray, mask: np.ndarray) -> None:
+                  passed: np.ndarray) -> None:
     """Fill the ``COLUMNS`` of ``out`` (N, M, F) (at the positions ``columns``) from the (N, M) arrays, the own
-    columns of ``own`` (N, ≥ 7) from ``bundle_sizes`` |b_i| (N,), the round and ``passed`` (N,), and ``mask``
-    (N, 1 + 2M)."""
+    columns of ``own`` (N, ≥ 7) from ``bundle_sizes`` |b_i| (N,), the round and ``passed`` (N,)."""
     n, m = gain.shape
     c = columns
     for i in range(n):
-        mask[i, 0] = 1
         for j in range(m):
             row = out[i, j]
             row[c[0]] = gain[i, j] / unit
@@ -53,8 +50,6 @@ def step_features(out: np.ndarray, columns: np.ndarray, unit: float, gain: np.nd
             row[c[11]] = now - assigned_at[i, j] if in_bundle[i, j] else 0
             row[c[12]] = prereqs_met[i, j]
             row[c[13]] = members[i, j] == task_agents[j]
-            mask[i, 1 + j] = can_bid[i, j] and not passed[i]
-            mask[i, 1 + m + j] = can_quit[i, j] and not passed[i]
         own[i, BUNDLE_SIZE] = bundle_sizes[i] / m
         own[i, ROUND] = round_fraction
         own[i, PASSED] = passed[i]
