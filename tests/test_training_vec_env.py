@@ -74,6 +74,7 @@ def test_shapes_spaces_and_step_contract():
 
 def test_masks_for_maskable_ppo_match_observations_and_are_enforced():
     venv = make(n_copies=2)
+    venv.seed(11)                         # the same instances as `strict` below, so its masks are venv's
     obs = venv.reset()
     assert is_masking_supported(venv) and venv.has_attr("action_masks")
     masks = get_action_masks(venv)        # sb3-contrib's own reader: np.stack(env.env_method("action_masks"))
@@ -82,6 +83,7 @@ def test_masks_for_maskable_ppo_match_observations_and_are_enforced():
     assert masks[:, 0].all() and masks[:, 1:].any()
     # the adapter sends actions unchanged: a masked-out action reaches the env, which raises under "raise"
     strict = make(n_copies=2, invalid_action="raise")
+    strict.seed(11)
     strict.reset()
     invalid = np.zeros(venv.num_envs, dtype=np.int64)
     row = int(np.flatnonzero(~masks.all(axis=1))[0])
