@@ -33,6 +33,7 @@ from taskalloc.evaluation.episodes import skip_reason
 from taskalloc.evaluation.pool import parallel_map
 from taskalloc.evaluation.seeds import VALIDATION_SEED_START
 from taskalloc.policies.base import stack_observations
+from taskalloc_env.actions import bid_columns
 from taskalloc_env.allocation import on_paths
 from taskalloc_env.config import resolve_config
 from taskalloc_env.env import TaskAllocEnv
@@ -75,7 +76,7 @@ def first_states(job: tuple[str, str, int, Sequence[str], Sequence[int]]) -> Fir
         observations, _ = env.reset(seed=int(seed))
         local.start(env, int(seed))
         obs, masks = stack_observations(observations, agents)
-        allowed.append(masks[:, 1: m + 1] > 0)
+        allowed.append(masks[:, bid_columns(m)] > 0)
         on_path.append(on_paths(SOLVERS[solver](env.scenario, env.config).paths, m))
         for name, planner in zip(planner_names, planners):
             planner.start(env, int(seed))

@@ -21,13 +21,14 @@ import numpy as np
 from taskalloc.policies.base import Policy
 from taskalloc.policies.centralised import exact
 from taskalloc.policies.local_search import local_search
+from taskalloc_env.actions import PASS, encode_bid
 
 SOLVERS = {"exact": exact, "lns": local_search}
 
 
 def bid_along(path: Sequence[int], mask: np.ndarray) -> int:
     """The bid on the first task of ``path`` that ``mask`` allows, or pass (0) when none is left."""
-    return next((1 + j for j in path if mask[1 + j]), 0)
+    return next((encode_bid(j) for j in path if mask[encode_bid(j)]), PASS)
 
 
 class OraclePolicy(Policy):
@@ -58,6 +59,6 @@ class OraclePolicy(Policy):
         good = np.zeros(masks.shape, dtype=bool)
         for row, agent in enumerate(agents):
             for j in self.paths[self.env.agent_index[agent]]:
-                good[row, 1 + j] = masks[row, 1 + j]
+                good[row, encode_bid(j)] = masks[row, encode_bid(j)]
         good[:, 0] = ~good.any(axis=1)
         return good

@@ -29,6 +29,7 @@ from research.policies.oracle import bid_along
 from taskalloc.policies.base import stack_observations
 from taskalloc.policies.checkpoint import Checkpoint, CheckpointError
 from taskalloc.policies.learned import LearnedPolicy
+from taskalloc_env.actions import bid_columns, n_actions
 
 PLANNER = "round0-planner"      # the checkpoint's meta["algo"] of a planner
 
@@ -65,7 +66,7 @@ class RoundZeroPlanner(LearnedPolicy):
         obs, masks = stack_observations(observations, agents)
         new = [k for k, a in enumerate(agents) if a not in self.plans and obs[k, round_column] == 0]
         if new:
-            p = np.where(masks[new, 1: m + 1] > 0, self.probabilities(self.actor_input(obs[new])), -1.0)
+            p = np.where(masks[new, bid_columns(m)] > 0, self.probabilities(self.actor_input(obs[new])), -1.0)
             self.plans.update((agents[k], planned(row, self.threshold)) for k, row in zip(new, p))
         return {a: bid_along(self.plans.get(a, ()), masks[k]) if obs[k, round_column] == 0 else 0
                 for k, a in enumerate(agents)}
@@ -84,7 +85,7 @@ class RoundZeroPlanner(LearnedPolicy):
 
     def decide(self, obs: np.ndarray, masks: np.ndarray) -> np.ndarray:
         m = self.layout.n_tasks
-        p = np.where(masks[:, 1: m + 1] > 0, self.probabilities(obs), -1.0)
+        p = np.where(masks[:, bid_columns(m)] > 0, self.probabilities(obs), -1.0)
         best = p.argmax(axis=1)
         first_round = obs[:, self.layout.own_names.index("round")] == 0     # own features lead every observation
         bid = first_round & (p[np.arange(len(obs)), best] >= self.threshold)
@@ -97,7 +98,7 @@ def bid_log_odds(actor: Any, obs: Any) -> Any:
     import torch as th
 
     m = (obs.shape[1] - actor.own_size) // actor.task_size
-    return actor(obs, th.ones(len(obs), 1 + 2 * m, dtype=th.bool))[:, 1: 1 + m]
+    return actor(obs, th.ones(len(obs), n_actions(m), dtype=th.bool))[:, bid_columns(m)]
 
 
 def planner_meta(checkpoint: Checkpoint, where: str) -> tuple[str, float, bool]:

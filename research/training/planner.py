@@ -60,6 +60,7 @@ from taskalloc.training.config import (
     prepare_out_dir,
 )
 from taskalloc.training.mappo import check_actor, make_actor
+from taskalloc_env.actions import bid_columns
 from taskalloc_env.allocation import on_paths
 from taskalloc_env.config import resolve_config, to_mapping
 from taskalloc_env.env import TaskAllocEnv
@@ -152,7 +153,7 @@ def label(job: tuple[str, dict[str, Any], str, Sequence[int]]) -> Plans:
             obs, masks = stack_observations(observations, agents)
             if obs[0, round_column] > 0:
                 break
-            allowed = masks[:, 1: m + 1] > 0
+            allowed = masks[:, bid_columns(m)] > 0
             rows = allowed.any(axis=1)
             parts.append(Plans(obs[rows].astype(np.float32), allowed[rows], (on_path & allowed)[rows]))
             observations, *_ = env.step({a: bid_along(paths[env.agent_index[a]], observations[a]["action_mask"])
