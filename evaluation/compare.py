@@ -64,12 +64,11 @@ def usable_learned(source: str, cfg: TaskAllocConfig) -> tuple[str | None, str]:
         env.reset(seed=0)
         policy.start(env, 0)
     except ImportError as exc:
-        return None, f"learned policy {source}: skipped, it needs the learned extra: pip install taskalloc[learned] " \
-                     f"({exc})"
+        return None, f"it needs the learned extra: pip install taskalloc[learned] ({exc})"
     except CheckpointError as exc:
-        return None, f"learned policy {source}: skipped, the checkpoint cannot be loaded ({exc})"
+        return None, f"the checkpoint cannot be loaded ({exc})"
     except ValueError as exc:
-        return None, f"learned policy {source}: skipped, it does not fit this scenario ({exc})"
+        return None, f"it does not fit this scenario ({exc})"
     return solver, ""
 
 
@@ -110,7 +109,9 @@ def summary(rows: Sequence[dict[str, Any]], order: Sequence[str]) -> tuple[str, 
 
 def compare(scenario: str, episodes: int, overrides: dict[str, Any], jobs: int = 1, out: Path | None = None,
             learned: Sequence[str] | None = None, progress: bool = False, backend: str = "local") -> str:
-    """Run the comparison; returns the report text (also written to ``out`` when given)."""
+    """Run the comparison; returns the report text (also written to ``out`` when given). ``learned`` None: every
+    committed model, each skipped with a note where it does not apply; a policy named in ``learned`` that cannot run
+    is a ``ConfigError``."""
     cfg = resolve_config(scenario, **overrides)
     notes, solvers = [], []
     for solver in BASELINES:
@@ -126,8 +127,10 @@ def compare(scenario: str, episodes: int, overrides: dict[str, Any], jobs: int =
         solver, why = usable_learned(path, cfg)
         if solver:
             solvers.append(solver)
-        else:
-            notes.append(why + ".")
+        elif learned is not None:           # asked for by name: an error, before any episode runs
+            raise ConfigError(f"--learned {path}: {why}")
+        else:                               # a committed model that does not apply here: a note
+            notes.append(f"learned policy {path}: skipped, {why}.")
     names = {s: display_name(s) for s in solvers}
     runs = [Episode(s, cfg, seed, (("policy", names[s]),)) for s in solvers for seed in range(episodes)]
     rows = run_episodes(runs, jobs=jobs, progress=progress, desc="compare", backend=backend)
