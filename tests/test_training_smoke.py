@@ -98,3 +98,32 @@ def test_training_runs_in_the_asynchronous_mode_with_popup_tasks(tmp_path):
     assert "released" in env.observation_layout.task_names
     allocation = rollout(env, policy, seed=VALIDATION_SEED_START)
     assert allocation.counters.broadcasts > 0 and allocation.counters.rounds > 0
+
+
+def test_the_progress_bar_ends_at_its_total(tmp_path, monkeypatch):
+    """PPO collects whole rollouts (here 8 copies × 4 agents × 32 steps = 1024): 1500 steps asked for are 2048 taken,
+    and the bar's total says so instead of being overshot."""
+    from taskalloc.training import callbacks
+
+    bars = []
+
+    class Bar:
+        def __init__(self, total: int) -> None:
+            self.total, self.n = total, 0
+            bars.append(self)
+
+        def update(self, n: int) -> None:
+            self.n += n
+
+        def refresh(self) -> None:
+            """Nothing to draw."""
+
+        def close(self) -> None:
+            """Nothing to close."""
+
+    monkeypatch.setattr(callbacks, "tqdm", Bar)
+    args = [arg for arg in SMALL if arg != "--no-progress-bar"]
+    summary = train.main(["--name", "bar", "--out-dir", str(tmp_path), "--log-dir", str(tmp_path / "logs"), *args,
+                          "--total-steps", "1500", "--eval-freq", "0", "--eval-episodes", "2", "--progress-bar"])
+    assert summary["ppo"]["steps"] == 2048
+    assert [(bar.n, bar.total) for bar in bars] == [(2048, 2048)]
