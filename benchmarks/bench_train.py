@@ -41,8 +41,8 @@ def bench_sb3(steps: int, n_procs: int, out_dir: str, torch_threads: int = 1) ->
     from taskalloc.training.train import build_model, load_config
     from taskalloc.training.vec_env import TaskAllocVecEnv, make_env_fns
 
-    cfg = load_config(["--config", "train_small", "--n-procs", str(n_procs), "--tensorboard", "false",
-                       "--progress-bar", "false", "--out-dir", out_dir, "--torch-threads", str(torch_threads)])
+    cfg = load_config(["--config", "train_small", "--n-procs", str(n_procs), "--no-tensorboard",
+                       "--no-progress-bar", "--out-dir", out_dir, "--torch-threads", str(torch_threads)])
     th.set_num_threads(cfg.torch_threads)
     venv = TaskAllocVecEnv(make_env_fns(cfg.n_envs, **cfg.env_kwargs()), n_procs=n_procs)
     model = build_model(cfg, venv)

@@ -69,12 +69,11 @@ def usable_learned(source: str, cfg: TaskAllocConfig) -> tuple[str | None, str]:
         env.reset(seed=0)
         policy.start(env, 0)
     except ImportError as exc:
-        return None, f"learned policy {source}: skipped, it needs the learned extra: pip install taskalloc[learned] " \
-                     f"({exc})"
+        return None, f"it needs the learned extra: pip install taskalloc[learned] ({exc})"
     except CheckpointError as exc:
-        return None, f"learned policy {source}: skipped, the checkpoint cannot be loaded ({exc})"
+        return None, f"the checkpoint cannot be loaded ({exc})"
     except ValueError as exc:
-        return None, f"learned policy {source}: skipped, it does not fit this scenario ({exc})"
+        return None, f"it does not fit this scenario ({exc})"
     return solver, ""
 
 
@@ -129,8 +128,9 @@ def summary(rows: Sequence[dict[str, Any]], order: Sequence[str]) -> tuple[str, 
 def compare(scenario: str, episodes: int, overrides: dict[str, Any], jobs: int = 1, out: Path | None = None,
             learned: Sequence[str] | None = None, progress: bool = False, backend: str = "local",
             policies: Sequence[str] = ()) -> str:
-    """Run the comparison; returns the report text (also written to ``out`` when given). ``policies`` adds rows:
-    policy names or import paths (``chosen_policy``)."""
+    """Run the comparison; returns the report text (also written to ``out`` when given). ``learned`` None: the default
+    learned rows, each skipped with a note where it does not apply; a policy named in ``learned`` that cannot run is a
+    ``ConfigError``. ``policies`` adds rows: policy names or import paths (``chosen_policy``)."""
     cfg = resolve_config(scenario, **overrides)
     notes, solvers = [], []
     for solver in BASELINES:
@@ -146,8 +146,10 @@ def compare(scenario: str, episodes: int, overrides: dict[str, Any], jobs: int =
         solver, why = usable_learned(path, cfg)
         if solver:
             solvers.append(solver)
-        else:
-            notes.append(why + ".")
+        elif learned is not None:           # asked for by name: an error, before any episode runs
+            raise ConfigError(f"--learned {path}: {why}")
+        else:                               # a committed model that does not apply here: a note
+            notes.append(f"learned policy {path}: skipped, {why}.")
     solvers += [chosen_policy(name, cfg) for name in policies]
     labels = [display_name(s) for s in solvers]
     twice = sorted({label for label in labels if labels.count(label) > 1})

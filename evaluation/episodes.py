@@ -32,7 +32,7 @@ import numpy as np
 from tqdm import tqdm
 
 from taskalloc.evaluation.distributed import BACKENDS, ray_map
-from taskalloc.evaluation.pool import parallel_map
+from taskalloc.evaluation.pool import as_finished, worker_threads
 from taskalloc.policies import exact, local_search, make_policy, rollout, sgama
 from taskalloc.policies.base import Policy
 from taskalloc.policies.centralised import MAX_AGENTS, MAX_TASKS
@@ -40,7 +40,7 @@ from taskalloc.policies.duo import preferred_duo_cbba
 from taskalloc.policies.fast import solvable as fast_solvable
 from taskalloc.policies.fast import solve as fast_solve
 from taskalloc.policies.scripted import CBGAPolicy
-from taskalloc_env import Scenario, TaskAllocConfig, TaskAllocEnv
+from taskalloc_env import Scenario, TaskAllocConfig, TaskAllocEnv, kernels
 from taskalloc_env.allocation import Allocation
 from taskalloc_env.config import max_required_agents
 
@@ -204,14 +204,37 @@ def default_jobs() -> int:
 def run_episodes(episodes: Sequence[Episode], jobs: int = 1, progress: bool = True,
                  desc: str = "episodes", backend: str = "local") -> list[dict[str, Any]]:
     """Run every episode (in ``jobs`` processes when > 1, or as Ray tasks with ``backend="ray"``, see
-    ``taskalloc.evaluation.distributed``); rows come back in the order of ``episodes``."""
+    ``taskalloc.evaluation.distributed``); rows come back in the order of ``episodes``, the progress bar advances
+    as episodes finish. Locally, the compiled kernels are ready before the bar starts (``warm_up``)."""
     if backend not in BACKENDS:
         raise ValueError(f"backend {backend!r} is not one of {BACKENDS}")
-    rows = []
-    with tqdm(total=len(episodes), desc=desc, disable=not progress, unit="ep", dynamic_ncols=True) as bar:
-        for row in (ray_map(run_episode, episodes) if backend == "ray" else parallel_map(run_episode, episodes, jobs)):
-            rows.append(row)
+    rows: dict[int, dict[str, Any]] = warm_up(episodes) if backend == "local" else {}
+    todo = [i for i in range(len(episodes)) if i not in rows]
+    finished = (enumerate(ray_map(run_episode, episodes)) if backend == "ray"
+                else as_finished(run_episode, [episodes[i] for i in todo], jobs))
+    with tqdm(total=len(episodes), initial=len(rows), desc=desc, disable=not progress, unit="ep",
+              dynamic_ncols=True) as bar:
+        for index, row in finished:
+            rows[index if backend == "ray" else todo[index]] = row
             bar.update()
+    return [rows[i] for i in range(len(episodes))]
+
+
+def warm_up(episodes: Sequence[Episode]) -> dict[int, dict[str, Any]]:
+    """Rows of episodes run here, first, so that no worker compiles the kernels: the first episode; if it compiled
+    (a cold cache, ``taskalloc_env.kernels.cache``), also the first episode of every other (solver, config) pair,
+    which fills the cache for the workers (one compile, announced on stderr, instead of one per worker while the
+    progress bar waits). With a warm cache only the first episode runs here. Keys are indices into ``episodes``."""
+    if not episodes:
+        return {}
+    with worker_threads():
+        compiles = kernels.NOTICE.compiles
+        rows = {0: run_episode(episodes[0])}
+        if kernels.NOTICE.compiles > compiles:
+            firsts: dict[tuple[str, TaskAllocConfig], int] = {}
+            for index, episode in enumerate(episodes):
+                firsts.setdefault((episode.solver, episode.config), index)
+            rows.update({i: run_episode(episodes[i]) for i in firsts.values() if i not in rows})
     return rows
 
 

@@ -31,6 +31,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "checkpoint": ("taskalloc.policies.checkpoint", "inspect or convert a learned policy's checkpoint"),
 }
 
+# top-level packages of the optional extras (pyproject.toml) -> the extra that installs them
+EXTRAS = {"torch": "learned", "safetensors": "learned", "stable_baselines3": "train", "sb3_contrib": "train",
+          "tensorboard": "train", "ray": "ray"}
+
 
 def usage() -> str:
     width = max(map(len, COMMANDS))
@@ -52,7 +56,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         print(f"taskalloc: unknown subcommand {name!r}{hint}; choose from: {', '.join(COMMANDS)}", file=sys.stderr)
         return 2
-    module = importlib.import_module(COMMANDS[name][0])
+    try:
+        module = importlib.import_module(COMMANDS[name][0])
+    except ModuleNotFoundError as exc:         # an optional extra (ray for rllib) that is not installed
+        extra = EXTRAS.get(exc.name or "")
+        if extra is None:
+            raise
+        print(f"taskalloc {name}: needs the Python package {exc.name!r}, which is not installed "
+              f"(pip install 'taskalloc[{extra}]')", file=sys.stderr)
+        return 1
     return run_cli(lambda: module.main(rest))
 
 

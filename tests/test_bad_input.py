@@ -241,9 +241,9 @@ def test_compare_overwrites_when_asked(tmp_path, capsys):
 def test_compare_reports_a_refused_checkpoint_with_its_reason(tmp_path, capsys):
     path, marker = crafted_zip(tmp_path)
     assert compare_main(["compare", "--episodes", "2", "--set", "n_agents=4", "--set", "n_tasks=6", "--jobs", "1",
-                 "--no-progress", "--learned", str(path)]) == 0
-    out = capsys.readouterr().out
-    note = next(line for line in out.splitlines() if line.startswith(f"- learned policy {path}"))
+                 "--no-progress", "--learned", str(path)]) == 2
+    note = capsys.readouterr().err.strip()
+    assert note.startswith(f"error: --learned {path}: ") and "\n" not in note, note
     assert "cannot be loaded" in note and "stable-baselines3 zip" in note, note
     assert "does not fit this scenario" not in note
     assert not marker.exists()

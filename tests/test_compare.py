@@ -53,10 +53,19 @@ def test_compare_is_deterministic_and_writes_table_and_plot(tmp_path, capsys):
     assert len({(r["seed"], r["instance"]) for r in episodes}) == 3   # paired: one instance per seed
 
 
-@pytest.mark.slow
-def test_missing_learned_checkpoint_is_skipped_with_a_note(tmp_path, capsys):
-    main(["compare", "--episodes", "2", "--set", "n_agents=4", "--set", "n_tasks=6",
-          "--learned", str(tmp_path / "run" / "model.zip")])
-    out = capsys.readouterr().out
-    assert "skipped" in out and str(tmp_path / "run") in out
-    assert set(_table_rows(out)) == set(BASELINE_ROWS)
+@pytest.mark.parametrize("source", ["nonexistent", "runs/none/model.zip"])
+def test_a_learned_policy_asked_for_that_cannot_load_is_a_usage_error(source, capsys):
+    assert main(["compare", "--episodes", "2", "--no-progress", "--learned", source]) == 2
+    captured = capsys.readouterr()
+    assert f"--learned {source}: the checkpoint cannot be loaded" in captured.err
+    assert "|" not in captured.out                                  # refused before any episode
+
+
+def test_a_committed_model_that_does_not_fit_is_skipped_with_a_note(monkeypatch):
+    from taskalloc.evaluation import compare
+
+    monkeypatch.setattr(compare, "learned_checkpoints", lambda: ["nonexistent"])
+    monkeypatch.setattr(compare, "BASELINES", ("cbga",))
+    text = compare.compare("default", 2, {"n_agents": 4, "n_tasks": 6})
+    assert "learned policy nonexistent: skipped, the checkpoint cannot be loaded" in text
+    assert set(_table_rows(text)) == {"CBGA"}

@@ -17,3 +17,18 @@ def test_the_quick_start_prints_what_the_readme_shows():
     with contextlib.redirect_stdout(out):
         exec(compile(code, "README quick start", "exec"), {})
     assert out.getvalue() == shown
+
+
+def test_the_readme_says_what_rollout_does_with_a_policys_env_overrides():
+    """``rollout`` checks the options (a runner applies them): the README says so, and rollout refuses an environment
+    built without them."""
+    import pytest
+
+    from taskalloc.policies import make_policy, rollout
+    from taskalloc_env import TaskAllocEnv
+
+    text = " ".join(README.read_text(encoding="utf-8").split())
+    assert re.search(r"`rollout` checks (it|them)", text)
+    assert not re.search(r"apply (it|them)[^.]*\(`rollout`", text) and "`rollout`, `compare`" not in text
+    with pytest.raises(ValueError, match="needs an environment with"):
+        rollout(TaskAllocEnv("default"), make_policy("cbgabi"), seed=0)

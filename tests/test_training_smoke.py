@@ -21,7 +21,7 @@ from taskalloc_env import ConfigError, TaskAllocEnv
 pytestmark = pytest.mark.slow
 
 SMALL = ["--n-envs", "8", "--n-steps", "32", "--batch-size", "256", "--n-epochs", "5", "--eval-episodes", "24",
-         "--progress-bar", "false", "--tensorboard", "false"]
+         "--no-progress-bar", "--no-tensorboard"]
 # A variant of train_small where the choice of task matters more (3 agents, start times within 10 min): uniform
 # random play reaches about 80 % of CBGABI here, against 94 % on train_small, so a few thousand steps show.
 HARD = {"task_quitting": True, "delta": 1, "n_agents": 3, "start_time_range": [0.0, 10.0]}
@@ -89,7 +89,7 @@ def test_training_runs_in_the_asynchronous_mode_with_popup_tasks(tmp_path):
     summary = train.main(["--name", "async", "--out-dir", str(tmp_path), "--log-dir", str(tmp_path / "logs"),
                           "--total-steps", "1024", "--eval-freq", "512", "--env-overrides", overrides,
                           "--n-envs", "4", "--n-steps", "64", "--batch-size", "128", "--n-epochs", "2",
-                          "--eval-episodes", "4", "--progress-bar", "false", "--tensorboard", "false"])
+                          "--eval-episodes", "4", "--no-progress-bar", "--no-tensorboard"])
     assert summary["ppo"]["steps"] >= 1024 and summary["validation"]["score"] > 0
     assert summary["cpu_seconds"] > 0 and summary["load_average_at_start"] >= 0 and "load_average_at_end" in summary
     policy = LearnedPolicy.load(tmp_path / "model.json")
@@ -98,3 +98,32 @@ def test_training_runs_in_the_asynchronous_mode_with_popup_tasks(tmp_path):
     assert "released" in env.observation_layout.task_names
     allocation = rollout(env, policy, seed=VALIDATION_SEED_START)
     assert allocation.counters.broadcasts > 0 and allocation.counters.rounds > 0
+
+
+def test_the_progress_bar_ends_at_its_total(tmp_path, monkeypatch):
+    """PPO collects whole rollouts (here 8 copies × 4 agents × 32 steps = 1024): 1500 steps asked for are 2048 taken,
+    and the bar's total says so instead of being overshot."""
+    from taskalloc.training import callbacks
+
+    bars = []
+
+    class Bar:
+        def __init__(self, total: int) -> None:
+            self.total, self.n = total, 0
+            bars.append(self)
+
+        def update(self, n: int) -> None:
+            self.n += n
+
+        def refresh(self) -> None:
+            """Nothing to draw."""
+
+        def close(self) -> None:
+            """Nothing to close."""
+
+    monkeypatch.setattr(callbacks, "tqdm", Bar)
+    args = [arg for arg in SMALL if arg != "--no-progress-bar"]
+    summary = train.main(["--name", "bar", "--out-dir", str(tmp_path), "--log-dir", str(tmp_path / "logs"), *args,
+                          "--total-steps", "1500", "--eval-freq", "0", "--eval-episodes", "2", "--progress-bar"])
+    assert summary["ppo"]["steps"] == 2048
+    assert [(bar.n, bar.total) for bar in bars] == [(2048, 2048)]

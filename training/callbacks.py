@@ -1,4 +1,5 @@
-"""SB3 callbacks: episode metrics to TensorBoard, periodic evaluation against a scripted baseline, checkpoints."""
+"""SB3 callbacks: episode metrics to TensorBoard, periodic evaluation against a scripted baseline, checkpoints, the
+progress bar."""
 
 from __future__ import annotations
 
@@ -9,7 +10,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, ProgressBarCallback
+from tqdm.rich import tqdm
 
 from taskalloc.evaluation.episodes import evaluate, summarise
 from taskalloc.policies.registry import make_policy
@@ -93,3 +95,16 @@ class PeriodicEvalCallback(BaseCallback):
 
     def _on_training_end(self) -> None:
         self.evaluate_now()
+
+
+class RolloutProgressBar(ProgressBarCallback):
+    """SB3's progress bar with the total PPO reaches: the steps asked for rounded up to whole rollouts of
+    ``rollout`` steps (SB3's own bar counts to the steps asked for and runs past its total)."""
+
+    def __init__(self, rollout: int) -> None:
+        super().__init__()
+        self.rollout = rollout
+
+    def _on_training_start(self) -> None:
+        wanted = self.locals["total_timesteps"] - self.model.num_timesteps
+        self.pbar = tqdm(total=-(-wanted // self.rollout) * self.rollout)

@@ -1,14 +1,17 @@
 """Training configs as dataclasses: one YAML file (``--config NAME_OR_FILE``) plus ``--field value`` overrides.
 
-Every field carries its help text (``opt``), so ``--help`` lists them all; values on the command line are read as
-YAML (``null``, ``true``, ``1e-4``, ``{k: v}``, ``[a, b]``). Type errors name the field and what is allowed. Used by
-``taskalloc.training.train`` (SB3) and ``taskalloc.training.mappo`` (our own PPO loop).
+Every field carries its help text (``opt``), so ``--help`` lists them all; a boolean field is a flag
+(``--overwrite`` / ``--no-overwrite``, as in ``taskalloc compare``), other values on the command line are read as
+YAML (``null``, ``1e-4``, ``{k: v}``, ``[a, b]``); a config file sets booleans as YAML (``overwrite: true``). Type
+errors name the field and what is allowed; a config written for the other trainer names the command that reads it.
+Used by ``taskalloc.training.train`` (SB3) and ``taskalloc.training.mappo`` (our own PPO loop).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib
 import types
 import typing
 from collections.abc import Sequence
@@ -23,6 +26,10 @@ from taskalloc_env.config import read_yaml
 from taskalloc_env.errors import ConfigError
 
 C = TypeVar("C")
+
+# the commands that read configs/training: command -> (module, its config class, what it is)
+TRAINERS = {"taskalloc train": ("taskalloc.training.train", "TrainConfig", "the SB3 trainer"),
+            "taskalloc mappo": ("taskalloc.training.mappo", "MappoConfig", "the MAPPO trainer")}
 
 
 def opt(default: Any, help: str) -> Any:
@@ -79,15 +86,20 @@ def coerce(cls: type, name: str, value: Any) -> Any:
 def parse(cls: type[C], argv: Sequence[str] | None, prog: str, description: str | None,
           configs: Path | None = None) -> C:
     """``--config NAME_OR_FILE`` (a name from ``configs`` when it holds it, else from ``configs/training``, or a YAML
-    path), then ``--field value``."""
+    path), then ``--field value`` (``--flag`` / ``--no-flag`` for a boolean field)."""
     parser = argparse.ArgumentParser(prog=prog, description=description,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--config", metavar="NAME_OR_FILE",
                         help="training config: a name from configs/training or a YAML file")
+    hints = typing.get_type_hints(cls)
     for field in dataclasses.fields(cls):
-        parser.add_argument(f"--{field.name.replace('_', '-')}", dest=field.name, type=yaml.safe_load,
-                            default=argparse.SUPPRESS, metavar="VALUE",
-                            help=f"{field.metadata['help']} (default: {default_of(field)})")
+        flag, text = f"--{field.name.replace('_', '-')}", f"{field.metadata['help']} (default: {default_of(field)})"
+        if hints[field.name] is bool:
+            parser.add_argument(flag, dest=field.name, action=argparse.BooleanOptionalAction,
+                                default=argparse.SUPPRESS, help=text)
+        else:
+            parser.add_argument(flag, dest=field.name, type=yaml.safe_load, default=argparse.SUPPRESS,
+                                metavar="VALUE", help=text)
     args = vars(parser.parse_args(argv))
     values: dict[str, Any] = {}
     source = args.pop("config", None)
@@ -104,9 +116,23 @@ def parse(cls: type[C], argv: Sequence[str] | None, prog: str, description: str 
         known = [f.name for f in dataclasses.fields(cls)]
         unknown = sorted(set(values) - set(known))
         if unknown:
+            owner = trainer_for(values, prog)
+            if owner:
+                raise ConfigError(f"training config {str(path)!r} is for `{owner}` ({TRAINERS[owner][2]}), not "
+                                  f"`{prog}`: run {owner} --config {source}")
             raise ConfigError(f"training config {str(path)!r}: unknown fields {unknown}; known: {known}")
     values.update(args)
     return cls(**{k: coerce(cls, k, v) for k, v in values.items()})
+
+
+def trainer_for(values: dict[str, Any], prog: str) -> str | None:
+    """The other command of ``TRAINERS`` whose config has every field of ``values`` (None if there is none)."""
+    for command, (module, name, _) in TRAINERS.items():
+        if command != prog:
+            fields = {f.name for f in dataclasses.fields(getattr(importlib.import_module(module), name))}
+            if set(values) <= fields:
+                return command
+    return None
 
 
 def prepare_out_dir(out_dir: str | Path, overwrite: bool) -> Path:
@@ -115,7 +141,7 @@ def prepare_out_dir(out_dir: str | Path, overwrite: bool) -> Path:
     existing = sorted(p.name for p in out_dir.glob("*.json")) if out_dir.is_dir() else []
     if existing and not overwrite:
         raise ConfigError(f"out_dir {str(out_dir)!r} already holds a model ({', '.join(existing)}); pass --overwrite "
-                          "true to replace it, or choose another --out-dir")
+                          "to replace it, or choose another --out-dir")
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "eval.csv").unlink(missing_ok=True)     # a new run starts a new learning curve
     return out_dir

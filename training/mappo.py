@@ -2,7 +2,7 @@
 
     taskalloc mappo --config mappo_small                    # attention actor on train_small
     taskalloc mappo --config mappo_mixture --seed 1         # one model over sizes 4×8 … 10×20
-    taskalloc mappo --config mappo_small --out-dir models/mappo_small --overwrite true   # the committed one
+    taskalloc mappo --config mappo_small --out-dir models/mappo_small --overwrite   # the committed one
 
 The loop reads top to bottom in the manner of CleanRL's ``ppo.py`` (Huang et al. 2022, "The 37 Implementation
 Details of Proximal Policy Optimization"): config, environments, networks, then rollouts, advantages and clipped

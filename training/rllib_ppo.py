@@ -160,7 +160,7 @@ def export_checkpoint(args: argparse.Namespace) -> Path:
     if not isinstance(module, TaskAllocRLModule):
         raise ConfigError(f"{args.rllib_checkpoint}: holds a {type(module).__name__}, not a TaskAllocRLModule")
     if Path(args.out).with_suffix(".json").exists() and not args.overwrite:
-        raise ConfigError(f"{args.out}.json exists; pass --overwrite true to replace it")
+        raise ConfigError(f"{args.out}.json exists; pass --overwrite to replace it")
     written = export(module, Path(args.out), args.env_overrides, {"algo": "rllib_ppo",
                                                                    "exported_from": source.name})
     print(f"written: {written} and {written.with_suffix('.safetensors')}")
@@ -180,8 +180,8 @@ def main(argv: Sequence[str] | None = None) -> Any:
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("train", help="train with RLlib PPO, then write the RLlib and the project checkpoint")
     run.add_argument("--out-dir", required=True, help="folder for model.json/.safetensors, rllib/ and summary.yaml")
-    run.add_argument("--overwrite", type=yaml.safe_load, default=False,
-                     help="replace a model already in --out-dir (default: false)")
+    run.add_argument("--overwrite", action=argparse.BooleanOptionalAction, default=False,
+                     help="replace a model already in --out-dir (default: no)")
     run.add_argument("--name", default="rllib_ppo", help="run name stored in the checkpoint (default rllib_ppo)")
     run.add_argument("--scenario", default="train_small", help="scenario name or YAML path (default train_small)")
     run.add_argument("--set", type=_mapping, default={}, metavar="YAML",
@@ -207,7 +207,8 @@ def main(argv: Sequence[str] | None = None) -> Any:
     exp = sub.choices["export"]
     exp.add_argument("rllib_checkpoint", help="the algorithm checkpoint folder (<out-dir>/rllib) or a module's")
     exp.add_argument("out", help="the checkpoint stem to write (OUT.json, OUT.safetensors)")
-    exp.add_argument("--overwrite", type=yaml.safe_load, default=False, help="replace OUT.json if it exists")
+    exp.add_argument("--overwrite", action=argparse.BooleanOptionalAction, default=False,
+                     help="replace OUT.json if it exists (default: no)")
     args = parser.parse_args(argv)
     args.argv = list(sys.argv[1:] if argv is None else argv)
     unknown = sorted(set(args.env_overrides) - set(PROTOCOL_FIELDS))

@@ -41,7 +41,7 @@ from taskalloc.evaluation.seeds import DEMO_SEED_START, TEST_SEEDS, VALIDATION_S
 from taskalloc.policies.networks import count_parameters
 from taskalloc.policies.teams import scripted_env_overrides, with_teammates
 from taskalloc.training.bc import behaviour_cloning, collect_demonstrations
-from taskalloc.training.callbacks import EpisodeMetricsCallback, PeriodicEvalCallback
+from taskalloc.training.callbacks import EpisodeMetricsCallback, PeriodicEvalCallback, RolloutProgressBar
 from taskalloc.training.config import check_at_least, check_types, opt, parse, plain, prepare_out_dir
 from taskalloc.training.sb3_policy import (
     BODIES,
@@ -229,13 +229,14 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             callbacks.append(CheckpointCallback(max(1, cfg.checkpoint_freq // venv.num_envs),
                                                 str(log_dir / "checkpoints"), name_prefix=cfg.name))
         rollout = cfg.n_steps * venv.num_envs
+        if cfg.progress_bar:
+            callbacks.append(RolloutProgressBar(rollout))
         if cfg.total_steps % rollout:
             print(f"note: total_steps {cfg.total_steps} rounds up to {-(-cfg.total_steps // rollout) * rollout}: PPO "
                   f"collects whole rollouts of n_steps × slots = {cfg.n_steps} × {venv.num_envs} = {rollout} steps",
                   file=sys.stderr, flush=True)
         t0 = time.perf_counter()
-        model.learn(cfg.total_steps, callback=CallbackList(callbacks), progress_bar=cfg.progress_bar,
-                    tb_log_name=cfg.name)
+        model.learn(cfg.total_steps, callback=CallbackList(callbacks), tb_log_name=cfg.name)
         seconds = time.perf_counter() - t0
         summary["ppo"] = {"steps": int(model.num_timesteps), "seconds": round(seconds, 1),
                           "agent_steps_per_second": round(model.num_timesteps / seconds, 1),

@@ -169,7 +169,7 @@ def test_a_short_run_lowers_the_validation_loss_and_saves_a_planner_that_hands_o
 def test_annealing_the_learning_rate_changes_the_epochs_after_the_first(trained, tmp_path):
     """The cosine schedule starts at the configured rate (epoch 0 the same, bit for bit, as the constant rate) and
     lowers it from epoch 1 on, so the later epochs' losses differ."""
-    planner.main([*SHORT_RUN, "--anneal-lr", "true", "--out-dir", str(tmp_path / "run")])
+    planner.main([*SHORT_RUN, "--anneal-lr", "--out-dir", str(tmp_path / "run")])
     constant, annealed = losses(trained), losses(tmp_path / "run")
     assert annealed[0] == constant[0]
     assert all(a != c for a, c in zip(annealed[1:], constant[1:]))

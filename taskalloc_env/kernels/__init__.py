@@ -15,7 +15,9 @@ rule
 
 Without numba, or with the environment variable ``TASKALLOC_KERNELS=reference``, ``COMPILED`` is false and the
 numpy references run instead (the same allocations; observations may differ in the last bit of an ``exp``, see
-docs/decisions.md). ``tests/test_kernels.py`` compares each kernel with its reference on random inputs.
+docs/decisions.md). ``tests/test_kernels.py`` compares each kernel with its reference on random inputs. The machine
+code is cached in a user folder shared by every process (``kernels.cache``: ``~/.cache/taskalloc/numba`` unless
+``NUMBA_CACHE_DIR`` is set); a process that compiles says so in one line on stderr.
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from typing import Any
+
+from taskalloc_env.kernels.cache import CompileNotice, cache_dir, caching_in
 
 try:
     import numba
@@ -34,8 +38,14 @@ MODE = os.environ.get("TASKALLOC_KERNELS", "compiled")
 if MODE not in MODES:
     raise ImportError(f"TASKALLOC_KERNELS={MODE!r} is not one of {MODES}")
 COMPILED = numba is not None and MODE == "compiled"
+NOTICE = CompileNotice()        # this process's compiles of the kernels below (cache misses)
+if COMPILED:
+    NOTICE.listen()
 
 
 def jit(function: Callable[..., Any]) -> Callable[..., Any]:
-    """``numba.njit`` with an on-disk cache, or the function itself without numba."""
-    return numba.njit(cache=True, nogil=True)(function) if COMPILED else function
+    """``numba.njit`` with an on-disk cache in ``cache_dir()``, or the function itself without numba."""
+    if not COMPILED:
+        return function
+    with caching_in(numba, cache_dir()):
+        return NOTICE.watch(numba.njit(cache=True, nogil=True)(function))
