@@ -24,6 +24,7 @@ import dataclasses
 import inspect
 import io
 import json
+import struct
 import warnings
 import zipfile
 from collections.abc import Mapping, Sequence
@@ -33,11 +34,14 @@ from typing import Any
 
 from taskalloc_env.config import PROTOCOL_FIELDS
 from taskalloc_env.errors import ConfigError, run_cli
+from taskalloc_env.resources import check_file, read_bounded
 
 FORMAT, VERSION = "taskalloc-checkpoint", 1
 MAX_JSON_BYTES = 1 << 20
 MAX_SIZE = 1 << 16              # largest integer size a network may be built with
 MAX_PARAMETERS = 50_000_000     # largest actor a checkpoint may describe (refused before anything is allocated)
+MAX_WEIGHT_BYTES = 8 * MAX_PARAMETERS + MAX_JSON_BYTES      # a safetensors file of that many float64 weights
+MAX_ZIP_MEMBERS = 64            # an SB3 zip holds a handful of entries (data, policy.pth, optimizer, versions)
 
 
 class CheckpointError(ConfigError):
@@ -90,12 +94,15 @@ def load(source: str | Path | Traversable, allow_pickle: bool = False) -> Checkp
     if isinstance(source, (str, Path)):
         source = Path(source)
         if source.suffix == ".zip":
+            if not source.is_file():
+                raise CheckpointError(f"no stable-baselines3 zip at {str(source)!r}")
             return _load_sb3_zip(source, allow_pickle)
         if source.is_dir():
             source = source / "model.json"
         elif source.suffix != ".json":
             source = source.with_name(source.name + ".json")
     spec = _read_spec(source)
+    _network(spec, str(source))             # the architecture's size, refused before the weights are read
     weights = source.parent / (source.name[: -len(".json")] + ".safetensors") if isinstance(source, Path) else \
         _sibling(source, ".safetensors")
     return _build(spec, _read_weights(weights), str(source))
@@ -110,12 +117,9 @@ def _sibling(source: Traversable, suffix: str) -> Traversable:
 
 
 def _read_spec(source: Path | Traversable) -> dict[str, Any]:
-    try:
-        raw = source.read_bytes()
-    except (OSError, FileNotFoundError) as exc:
-        raise CheckpointError(f"no checkpoint at {str(source)!r} ({exc.strerror or exc})") from None
-    if len(raw) > MAX_JSON_BYTES:
-        raise CheckpointError(f"{source}: {len(raw)} bytes is too large for a checkpoint description")
+    if isinstance(source, Path) and not source.exists():
+        raise CheckpointError(f"no checkpoint at {str(source)!r} (no such file)")
+    raw = read_bounded(source, MAX_JSON_BYTES, "checkpoint description", CheckpointError)
     try:
         spec = json.loads(raw)
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -128,18 +132,53 @@ def _read_spec(source: Path | Traversable) -> dict[str, Any]:
 
 
 def _read_weights(source: Path | Traversable) -> dict[str, Any]:
+    """The tensors of a safetensors file, its header read first: a file of more than ``MAX_PARAMETERS`` weights
+    (counted from the header's shapes) or more than ``MAX_WEIGHT_BYTES`` bytes is refused before its data is read."""
     from safetensors import SafetensorError
     from safetensors.torch import load
 
+    if isinstance(source, Path) and not source.exists():
+        raise CheckpointError(f"no weights at {str(source)!r} (no such file)")
+    check_file(source, MAX_WEIGHT_BYTES, "weights file", CheckpointError)
     try:
-        return load(source.read_bytes())
-    except (OSError, FileNotFoundError) as exc:
+        with source.open("rb") as fh:
+            head = fh.read(8)
+            size = struct.unpack("<Q", head)[0] if len(head) == 8 else -1
+            header = fh.read(size) if 0 <= size <= MAX_JSON_BYTES else b""
+    except OSError as exc:
         raise CheckpointError(f"no weights at {str(source)!r} ({exc.strerror or exc})") from None
+    weights = _header_weights(header, str(source))
+    if weights > MAX_PARAMETERS:
+        raise CheckpointError(f"{source}: {weights} weights exceed the limit of {MAX_PARAMETERS}")
+    try:
+        return load(read_bounded(source, MAX_WEIGHT_BYTES, "weights file", CheckpointError))
     except SafetensorError as exc:
         raise CheckpointError(f"{source}: not a safetensors file ({exc})") from None
 
 
-def _build(spec: Mapping[str, Any], weights: Mapping[str, Any], where: str) -> Checkpoint:
+def _header_weights(header: bytes, where: str) -> int:
+    """The number of weights a safetensors header declares (its JSON: name → dtype, shape, offsets)."""
+    try:
+        entries = json.loads(header)
+        shapes = [entry["shape"] for name, entry in entries.items() if name != "__metadata__"]
+        if not all(isinstance(d, int) and d >= 0 for shape in shapes for d in shape):
+            raise TypeError("a shape holds something other than sizes")
+    except (UnicodeDecodeError, json.JSONDecodeError, AttributeError, KeyError, TypeError) as exc:
+        raise CheckpointError(f"{where}: not a safetensors file (header: {exc})") from None
+    total = 0
+    for shape in shapes:
+        count = 1
+        for d in shape:
+            count *= d
+        total += count
+    return total
+
+
+def _network(spec: Mapping[str, Any], where: str) -> tuple[type, dict[str, int]]:
+    """The network class and integer sizes a description asks for, refused when the network would exceed
+    ``MAX_PARAMETERS`` weights: it is built on torch's ``meta`` device (shapes, no storage) and counted."""
+    import torch as th
+
     from taskalloc.policies.networks import NETWORKS, count_parameters
 
     network = spec.get("network")
@@ -153,12 +192,24 @@ def _build(spec: Mapping[str, Any], weights: Mapping[str, Any], where: str) -> C
     for key, value in config.items():
         if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_SIZE:
             raise CheckpointError(f"{where}: network config {key}={value!r} is not an integer in 1..{MAX_SIZE}")
+    try:
+        with th.device("meta"):
+            planned = count_parameters(cls(**config))
+    except (ValueError, AssertionError, RuntimeError) as exc:
+        raise CheckpointError(f"{where}: network {network['class']} {config} cannot be built ({exc})") from None
+    if planned > MAX_PARAMETERS:
+        raise CheckpointError(f"{where}: {network['class']} {config} would have {planned} weights, more than the "
+                              f"limit of {MAX_PARAMETERS}")
+    return cls, config
+
+
+def _build(spec: Mapping[str, Any], weights: Mapping[str, Any], where: str) -> Checkpoint:
+    cls, config = _network(spec, where)
+    network = spec["network"]
     expected = sum(int(v.numel()) for v in weights.values())
     if expected > MAX_PARAMETERS:
         raise CheckpointError(f"{where}: {expected} weights exceed the limit of {MAX_PARAMETERS}")
     actor = cls(**config)
-    if count_parameters(actor) > MAX_PARAMETERS:
-        raise CheckpointError(f"{where}: the network would have more than {MAX_PARAMETERS} weights")
     try:
         actor.load_state_dict(dict(weights), strict=True)
     except RuntimeError as exc:

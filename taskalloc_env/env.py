@@ -236,7 +236,7 @@ class TaskAllocEnv(ParallelEnv):
         self._last_score = score
         terminated = protocol.converged
         truncated = not terminated and (
-            self._steps >= self.max_cycles or protocol.round >= protocol.max_rounds)
+            self._steps >= self.max_cycles or protocol.round >= protocol.max_rounds or protocol.halted)
         agents = list(self.agents)
         observations = self._observations()
         alive, index = protocol.alive.tolist(), self.agent_index
@@ -244,6 +244,9 @@ class TaskAllocEnv(ParallelEnv):
         terminations = {a: terminated or not alive[index[a]] for a in agents}
         truncations = dict.fromkeys(agents, truncated)
         infos = self._infos(flags)
+        if truncated and protocol.unresolved is not None:     # why the episode ended without convergence
+            for info in infos.values():
+                info["unresolved"] = protocol.unresolved
         if terminated or truncated:
             self._done = True
             self.agents = []
