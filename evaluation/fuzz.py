@@ -43,7 +43,7 @@ from taskalloc.evaluation.episodes import default_jobs
 from taskalloc.evaluation.pool import parallel_map
 from taskalloc.policies import make_policy
 from taskalloc_env import TaskAllocEnv
-from taskalloc_env.errors import run_cli
+from taskalloc_env.errors import run_cli, seed_argument
 
 CHECKS = ("spaces", "return", "converged", "agreement", "conflict-free", "valid groups", "determinism")
 POLICIES = ("random", "cbga", "cbga+tb", "cbga+tq", "cbgabi")
@@ -255,7 +255,7 @@ def fuzz(episodes: int, seed: int, jobs: int = 1) -> tuple[Counter, list[dict[st
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="taskalloc fuzz", description=__doc__.split("\n\n")[0])
     parser.add_argument("--episodes", type=int, default=300, help="random episodes to run (default 300)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the draw of configs, policies and seeds")
+    parser.add_argument("--seed", type=seed_argument, default=0, help="seed of the draw of configs, policies and seeds")
     parser.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes (default: every core)")
     args = parser.parse_args(argv)
     counts, failures = fuzz(args.episodes, args.seed, args.jobs)

@@ -235,16 +235,34 @@ def _names(value: Any) -> bool:
 
 # -- stable-baselines3 zips ------------------------------------------------------------------------------------------
 def _zip_json_and_weights(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The ``data`` JSON (as text, nothing unpickled) and the ``policy.pth`` state dict (``weights_only``)."""
+    """The ``data`` JSON (as text, nothing unpickled) and the ``policy.pth`` state dict (``weights_only``); the zip
+    (its size, its number of entries and the unpacked size of the two it reads) is checked before anything is
+    unpacked."""
     import torch as th
 
+    check_file(path, MAX_WEIGHT_BYTES + MAX_JSON_BYTES, "stable-baselines3 zip", CheckpointError)
     try:
         with zipfile.ZipFile(path) as archive:
-            data = json.loads(archive.read("data"))
-            state = th.load(io.BytesIO(archive.read("policy.pth")), map_location="cpu", weights_only=True)
-    except (OSError, KeyError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
+            data = json.loads(_zip_member(archive, "data", MAX_JSON_BYTES, path))
+            weights = _zip_member(archive, "policy.pth", MAX_WEIGHT_BYTES, path)
+            state = th.load(io.BytesIO(weights), map_location="cpu", weights_only=True)
+    except (OSError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise CheckpointError(f"{path}: not a stable-baselines3 checkpoint ({exc})") from None
     return data, state
+
+
+def _zip_member(archive: zipfile.ZipFile, name: str, limit: int, path: Path) -> bytes:
+    """One entry of a zip of at most ``MAX_ZIP_MEMBERS`` entries, refused when it unpacks to more than ``limit``
+    bytes (its size from the zip's directory; the read stops there too)."""
+    members = archive.infolist()
+    if len(members) > MAX_ZIP_MEMBERS:
+        raise CheckpointError(f"{path}: {len(members)} entries; a stable-baselines3 zip has at most "
+                              f"{MAX_ZIP_MEMBERS}")
+    info = archive.getinfo(name)
+    if info.file_size > limit:
+        raise CheckpointError(f"{path}: entry {name!r} unpacks to {info.file_size} bytes; the limit is {limit}")
+    with archive.open(info) as fh:
+        return fh.read(limit + 1)
 
 
 def sb3_zip_to_checkpoint(path: Path) -> Checkpoint:
@@ -310,10 +328,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     convert = sub.add_parser("convert", help="an SB3 zip of this project → a checkpoint (no unpickling)")
     convert.add_argument("zip", type=Path, help="the stable-baselines3 .zip")
     convert.add_argument("out", type=Path, help="the checkpoint stem to write (OUT.json, OUT.safetensors)")
+    convert.add_argument("--overwrite", action="store_true", help="replace an existing checkpoint at OUT")
     show = sub.add_parser("show", help="print a checkpoint's description")
     show.add_argument("path", type=Path, help="the checkpoint (.json, stem or folder)")
     args = parser.parse_args(argv)
     if args.command == "convert":
+        existing = [str(f) for f in (args.out.with_suffix(s) for s in (".json", ".safetensors")) if f.exists()]
+        if existing and not args.overwrite:
+            raise CheckpointError(f"{' and '.join(existing)} already exist(s); pass --overwrite to replace the "
+                                  "checkpoint")
+        if not args.zip.is_file():
+            raise CheckpointError(f"no stable-baselines3 zip at {str(args.zip)!r}")
         ckpt = sb3_zip_to_checkpoint(args.zip)
         written = save(args.out, ckpt.actor, ckpt.own_features, ckpt.task_features, ckpt.env_overrides,
                        {**ckpt.meta, "converted_from": args.zip.name})

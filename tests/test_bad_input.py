@@ -19,9 +19,9 @@ from typing import Any
 
 import pytest
 
+from taskalloc.cli import main as compare_main
 from taskalloc.evaluation import experiments
 from taskalloc.policies import make_policy
-from taskalloc.cli import main as compare_main
 from taskalloc.policies.checkpoint import CheckpointError
 from taskalloc.policies.learned import LearnedPolicy
 from taskalloc_env import Agent, ConfigError, Scenario, Task, TaskAllocEnv, resolve_config
