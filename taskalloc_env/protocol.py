@@ -6,7 +6,8 @@ phase (thesis §3.2.3 and §5.2.2):
 
     T += 1; exchange (consensus.exchange, Alg 6); outbid release (thesis §2.2.4, Johnson eqs. (3.11)–(3.12));
     quit timers (Alg 9 l. 4–5); convergence: no table or bundle changed for D + 1 consecutive rounds (and no quit
-    timer still running) -- our stopping rule: the thesis gives none for detecting convergence (docs/decisions.md).
+    timer still running) and every live agent agreeing -- our stopping rule: the thesis gives none for detecting
+    convergence (docs/decisions.md).
 
 Pop-up tasks (``releases``, any consensus mode): a task is invisible, and cannot be bid on, before its release
 round; a release counts as a change, and the run has not converged while a release is still to come.
@@ -372,9 +373,9 @@ class Protocol:
         self.counters.quits_seen += int(seen.sum())
 
     def _decide(self, stopped: bool, disagreement: str) -> None:
-        """Converged: the stopping test passed and the agents agree (thesis §2.2, the two phases alternate "until
+        """Converged: the stopping test passed and the agents agree (thesis §2.2.3: the two phases alternate "until
         assignments and consensus are achieved"); a stopping test passed without agreement is not convergence, and
-        ``unresolved`` says why (under lost or delayed messages)."""
+        ``unresolved`` says why (under lost or delayed messages; docs/decisions.md "Convergence means agreement")."""
         agreed = stopped and self.agreement()
         self.converged = agreed
         self.unresolved = disagreement if stopped and not agreed else None
