@@ -24,6 +24,7 @@ import dataclasses
 import inspect
 import io
 import json
+import pickle
 import struct
 import warnings
 import zipfile
@@ -248,6 +249,12 @@ def _zip_json_and_weights(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
             state = th.load(io.BytesIO(weights), map_location="cpu", weights_only=True)
     except (OSError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise CheckpointError(f"{path}: not a stable-baselines3 checkpoint ({exc})") from None
+    except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError) as exc:   # torch's refusals of policy.pth
+        raise CheckpointError(f"{path}: policy.pth is not a state dict of tensors (torch's weights-only reader "
+                              f"refused it: {type(exc).__name__})") from None
+    if not isinstance(data, dict) or not isinstance(state, dict):
+        raise CheckpointError(f"{path}: not a stable-baselines3 checkpoint (data must be a JSON object and "
+                              "policy.pth a state dict)")
     return data, state
 
 

@@ -306,3 +306,18 @@ def test_the_thesis_tables_loop_is_counted_apart_with_its_reason():
     assert fuzz._converges({**kw, "cbba_table": "canonical"}, name, seed)
     verdict = fuzz.run_case(THESIS_LOOP)
     assert verdict["converged"] is None and verdict["why"] == fuzz.THESIS_TABLE
+
+
+@pytest.mark.parametrize(("data", "weights", "words"), [
+    (b"{}", b"garbage", "policy.pth is not a state dict of tensors"),
+    (b"[1]", b"", "policy.pth is not a state dict of tensors"),
+    (b"{", b"", "not a stable-baselines3 checkpoint"),
+])
+def test_convert_of_a_broken_zip_is_one_checkpoint_error(data, weights, words, tmp_path):
+    path = tmp_path / "broken.zip"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("data", data)
+        archive.writestr("policy.pth", weights)
+    with pytest.raises(CheckpointError, match=words):
+        checkpoint.main(["convert", str(path), str(tmp_path / "out")])
+    assert not (tmp_path / "out.json").exists()
