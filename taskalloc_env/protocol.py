@@ -344,7 +344,8 @@ class Protocol:
         if stable and not self._settled():
             self.converged = False
             self.unresolved = ("no table changed for D + 1 rounds, but an agent has not received a message its "
-                               "neighbour sent after the last change (lost or delayed messages)")
+                               "neighbour sent after the last change (lost or delayed messages), or still counts "
+                               "on a failed agent")
         else:
             self._decide(stable, "no table changed for D + 1 rounds, but the agents' tables disagree")
         self._touch()
