@@ -216,8 +216,9 @@ def _record_losses(env: TaskAllocEnv) -> np.ndarray:
 
 def _lost_messages_explain(env: TaskAllocEnv, last_lost: np.ndarray) -> bool:
     """A non-converged episode under message loss that says why (``Protocol.unresolved``): synchronous agents still
-    waiting for a neighbour's message sent after the last change; under ``acbba``, which never resends, two agents
-    disagreeing after the last message between them was lost (docs/decisions.md "lost messages")."""
+    waiting for a neighbour's message sent after the last change, or tables still changing at the round bound;
+    under ``acbba``, which never resends, two agents disagreeing after the last message between them was lost
+    (docs/decisions.md "lost messages")."""
     protocol = env.protocol
     if protocol.unresolved is None or env.config.message_loss == 0:
         return False

@@ -348,6 +348,10 @@ class Protocol:
                                "on a failed agent")
         else:
             self._decide(stable, "no table changed for D + 1 rounds, but the agents' tables disagree")
+        if (not self.converged and self.unresolved is None and self.round >= self.max_rounds
+                and not (self.network.perfect and not self.dropouts)):
+            self.unresolved = ("the round bound T_max came while the tables were still changing (lost or delayed "
+                               "messages, or failed agents)")
         self._touch()
         return traffic
 
