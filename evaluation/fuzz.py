@@ -186,10 +186,10 @@ def _episode(kw: dict[str, Any], policy: Any, seed: int, verdict: dict[str, Any]
         livelock = env.config.asynchronous and documented and protocol.livelocked
         verdict.update({"spaces": spaces_ok, "return": abs(total * env.reward_scale - allocation.score) < 1e-6,
                         "converged": allocation.converged})
-        if livelock:
-            verdict["converged"], verdict["why"] = None, "ACBBA livelock (docs/decisions.md \"livelock\")"
-        elif not allocation.converged and _lost_messages_explain(env, last_lost):
+        if not allocation.converged and _lost_messages_explain(env, last_lost):
             verdict["converged"], verdict["why"] = None, f"lost messages: {protocol.unresolved}"
+        elif livelock:
+            verdict["converged"], verdict["why"] = None, "ACBBA livelock (docs/decisions.md \"livelock\")"
         at_rest = allocation.globally_converged and connected       # converged implies agreement (Protocol._decide)
         verdict["agreement"] = allocation.agreement if at_rest else None
         verdict["conflict-free"] = not allocation.conflicts if at_rest else None
@@ -220,7 +220,7 @@ def _lost_messages_explain(env: TaskAllocEnv, last_lost: np.ndarray) -> bool:
     under ``acbba``, which never resends, two agents disagreeing after the last message between them was lost
     (docs/decisions.md "lost messages")."""
     protocol = env.protocol
-    if protocol.unresolved is None or env.config.message_loss == 0:
+    if protocol.unresolved is None or protocol.network.perfect:
         return False
     return not env.config.asynchronous or _lost_disagreement(protocol, last_lost)
 

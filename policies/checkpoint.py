@@ -246,9 +246,10 @@ def _zip_json_and_weights(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
         with zipfile.ZipFile(path) as archive:
             data = json.loads(_zip_member(archive, "data", MAX_JSON_BYTES, path))
             weights = _zip_member(archive, "policy.pth", MAX_WEIGHT_BYTES, path)
-            state = th.load(io.BytesIO(weights), map_location="cpu", weights_only=True)
     except (OSError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise CheckpointError(f"{path}: not a stable-baselines3 checkpoint ({exc})") from None
+    try:
+        state = th.load(io.BytesIO(weights), map_location="cpu", weights_only=True)
     except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError) as exc:   # torch's refusals of policy.pth
         raise CheckpointError(f"{path}: policy.pth is not a state dict of tensors (torch's weights-only reader "
                               f"refused it: {type(exc).__name__})") from None
