@@ -191,7 +191,11 @@ def _override(text: str) -> tuple[str, Any]:
     if "=" not in text:
         raise argparse.ArgumentTypeError(f"--set takes FIELD=VALUE, got {text!r}")
     key, value = text.split("=", 1)
-    return key.strip(), yaml.safe_load(value)
+    try:
+        return key.strip(), yaml.safe_load(value)
+    except yaml.YAMLError as exc:                   # a tag such as !!python/object, or a parse error
+        raise argparse.ArgumentTypeError(f"--set {key.strip()}: not a plain YAML value "
+                                         f"({str(exc).splitlines()[0]})") from None
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -12,21 +12,29 @@ A learned policy named by a path is read on the worker: it must exist there (com
 
 from __future__ import annotations
 
+import importlib.util
 import os
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
+
+from taskalloc_env.errors import ConfigError
 
 BACKENDS = ("local", "ray")
 CHUNKS_PER_CPU = 4          # enough chunks to keep every CPU busy while the slowest ones finish
 
 
+def require_ray() -> None:
+    """Refuse the ray backend, before anything runs, when Ray is not installed."""
+    if importlib.util.find_spec("ray") is None:
+        raise ConfigError("the ray backend needs Ray, which is not installed: pip install 'taskalloc[ray]'")
+
+
 def init_ray() -> Any:
     """Ray, started locally (``address="local"``) or joined to ``RAY_ADDRESS``; Ray's own default (None) joins the
     last cluster started on this machine, and hung when that one was gone."""
-    try:
-        import ray
-    except ImportError as exc:
-        raise ImportError("the ray backend needs Ray: pip install 'taskalloc[ray]'") from exc
+    require_ray()
+    import ray
+
     if not ray.is_initialized():
         ray.init(address=os.environ.get("RAY_ADDRESS", "local"), include_dashboard=False, log_to_driver=False)
     return ray

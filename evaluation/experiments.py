@@ -3,7 +3,7 @@
     taskalloc experiments run configs/experiments/fig5_16_l4.yaml [--episodes N] [--jobs N] [--quick]
     taskalloc experiments run --all --overwrite   # every configs/experiments/*.yaml, rewrites results/
                                                              # and docs/results.md
-    taskalloc experiments report --all         # tables, plots and docs again from the saved CSVs
+    taskalloc experiments report --all --overwrite   # tables, plots and docs again from the saved CSVs
     taskalloc experiments list
 
 Each experiment runs every series on the same seeds 0..N−1 at every sweep point (the paired design of thesis
@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from taskalloc.evaluation.distributed import BACKENDS
+from taskalloc.evaluation.distributed import BACKENDS, require_ray
 from taskalloc.evaluation.episodes import Episode, check_pairing, default_jobs, run_episodes, skip_reason, solver_name
 from taskalloc.evaluation.report import (
     METRIC_DIGITS,
@@ -84,6 +84,7 @@ from taskalloc_env.errors import ConfigError, run_cli
 
 ROOT = Path(__file__).resolve().parent.parent   # the checkout (for the git commit of a run), if this is one
 RESULTS, DOCS = Path("results"), Path("docs") / "results.md"     # relative to where the command runs
+MAX_DOCS_BYTES = 16 << 20       # the results page is about 100 kB
 KEYS = {"name", "title", "source", "scenario", "overrides", "sweep", "series", "baseline", "metrics", "episodes",
         "headline", "published", "checks", "quick", "marks", "reference", "heatmap"}
 COMM_METRICS = ("comm_steps", "comm_steps_to_agreement")     # one message per agent, to the end / to agreement
@@ -763,8 +764,23 @@ def update_docs(docs: Path, name: str, title: str, block: str) -> None:
         text = head + generated + rest.split(end, 1)[1]
     else:
         text = text.rstrip("\n") + f"\n\n## {title}\n\n{generated}\n"
-    docs.parent.mkdir(parents=True, exist_ok=True)
     docs.write_text(text)
+
+
+def check_docs(docs: Path, name: str, overwrite: bool) -> None:
+    """Refuse a results page that is not one: an existing file must carry ``<!-- results:… -->`` markers (so a typo
+    such as ``--docs README.md`` changes nothing), and a block of ``name`` already on it is replaced only with
+    ``overwrite``; a new page is created only as a ``.md`` file in an existing folder."""
+    if docs.exists():
+        text = resources.read_bounded(docs, MAX_DOCS_BYTES, "results page").decode("utf-8", errors="replace")
+        if "<!-- results:" not in text:
+            raise ConfigError(f"{docs} is not a results page (it carries no <!-- results:NAME:start --> markers); "
+                              "name the results page, or --no-docs to leave the page alone")
+        if not overwrite and f"<!-- results:{name}:start -->" in text:
+            raise ConfigError(f"{docs} already holds the results of {name}; pass --overwrite to replace them, or "
+                              "--no-docs to leave the page alone")
+    elif docs.suffix != ".md" or not docs.parent.is_dir():
+        raise ConfigError(f"{docs} does not exist; a new results page must be a .md file in an existing folder")
 
 
 def report_experiment(exp: Experiment, out: Path, docs: Path | None) -> None:
@@ -800,6 +816,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                        help=f"results page whose experiment blocks to rewrite (default {DOCS} when it exists; "
                             "never with run --quick unless given)")
         p.add_argument("--no-docs", action="store_true", help="leave the results page alone")
+        p.add_argument("--overwrite", action="store_true",
+                       help="replace existing results (an experiment folder that holds files, or the experiment's "
+                            "block on the results page); without it they are refused")
     run.add_argument("--episodes", type=int, default=None, help="seeds per cell (default: the file's, 100)")
     run.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes (default: all cores)")
     run.add_argument("--quick", action="store_true", help="2 seeds at <= 3 points, into results/tmp/quick")
@@ -807,9 +826,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                      help="local: --jobs processes; ray: Ray tasks on a local Ray instance or the cluster RAY_ADDRESS "
                           "names (pip install taskalloc[ray]); the same tables either way")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
-    run.add_argument("--overwrite", action="store_true",
-                     help="replace existing results (an experiment folder that holds files, or the experiment's "
-                          "block on the results page); without it they are refused")
     args = parser.parse_args(argv)
     if args.command == "list":
         for name in resources.names("experiments"):
@@ -824,13 +840,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.no_docs:
         docs = None
     experiments = [load_experiment(p) for p in experiment_paths(args.paths, args.all)]
-    if args.command == "run":
-        for exp in experiments:
+    if args.command == "run" and args.backend == "ray":
+        require_ray()
+    for exp in experiments:
+        if args.command == "run":
             refuse_existing(out / exp.name, args.overwrite, "output folder")
-            if docs is not None and not args.overwrite and docs.is_file() \
-                    and f"<!-- results:{exp.name}:start -->" in docs.read_text():
-                raise ConfigError(f"{docs} already holds the results of {exp.name}; pass --overwrite to replace "
-                                  "them, or --no-docs to leave the page alone")
+        if docs is not None:
+            check_docs(docs, exp.name, args.overwrite)
+    if docs is not None and args.all:
+        check_docs(docs, "suite", args.overwrite)
     started = time.perf_counter()
     for exp in experiments:
         if args.command == "report":

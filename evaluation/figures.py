@@ -30,7 +30,7 @@ from taskalloc.evaluation.episodes import solve
 from taskalloc.evaluation.report import refuse_existing
 from taskalloc.policies import make_policy
 from taskalloc_env import TaskAllocEnv, resolve_config
-from taskalloc_env.errors import run_cli
+from taskalloc_env.errors import run_cli, seed_argument
 from taskalloc_env.network import CommGraph
 from taskalloc_env.scenario import generate
 
@@ -130,7 +130,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="taskalloc figures", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     cmd = sub.add_parser("links", help="agents, ranges, links and assignments of one instance (Figs 4.2–4.5)")
-    cmd.add_argument("--seed", type=int, default=None, help="instance seed (default: the first that fits, above)")
+    cmd.add_argument("--seed", type=seed_argument, default=None,
+                     help="instance seed (default: the first that fits, above)")
     cmd.add_argument("--out", type=Path, default=Path("results") / "fig4_2_5_links",
                      help="folder for the PNGs (a folder that holds files is refused unless --overwrite)")
     cmd.add_argument("--overwrite", action="store_true", help="replace the files of an existing --out folder")

@@ -4,21 +4,24 @@
     taskalloc fuzz --episodes 20000 --seed 7 --jobs 2
 
 Each episode draws a config (sizes, L_j, equipment mixes, prerequisite chains, communication range, every named
-scoring and protocol option, message loss, bursts, delays and failing agents, pop-up tasks, the asynchronous
-consensus ``acbba`` with its processing times and table options), a policy (random, CBGA and its variants, CBBA and
-ACBBA where every L_j = 1) and a seed, runs it and checks:
+scoring and protocol option, message loss, bursts, delays and failing agents, heavier loss and delay from a third
+stream (``HEAVY_FAULTS``), pop-up tasks, the asynchronous consensus ``acbba`` with its processing times and table
+options), a policy (random, CBGA and its variants, CBBA and ACBBA where every L_j = 1) and a seed, runs it and checks:
 
 * ``spaces``: every observation lies in its space, every mask is binary int8 with pass allowed, every action the
   policy takes is allowed;
 * ``return``: the episode return × reward_scale equals ``evaluate().score``;
-* ``converged``: the episode ends by convergence, not by the round bound (lost and delayed messages and failing
-  agents included); under ``acbba`` the documented livelocks (docs/decisions.md "livelock") are the exceptions,
-  recognised by ``AsyncProtocol.livelocked`` (agents keep talking while the bundles reach no new state): Johnson's
-  row 15 on a network that is not fully connected, and a stale bid re-timed by ``acbba_outbid_time = bump`` on any;
+* ``converged``: the episode ends by convergence (every live agent agreeing), not by the round bound (lost and
+  delayed messages and failing agents included). Not applicable, counted apart with the reason: the documented ACBBA
+  livelocks (docs/decisions.md "livelock"), recognised by ``AsyncProtocol.livelocked`` (agents keep talking while the
+  bundles reach no new state: Johnson's row 15 on a network that is not fully connected, a stale bid re-timed by
+  ``acbba_outbid_time = bump`` on any); an episode under message loss that ends saying why (``Protocol.unresolved``:
+  a synchronous agent still waiting for a neighbour's message after the last change; under ``acbba``, which never
+  resends, two agents disagreeing after the last message between them was lost, docs/decisions.md "lost
+  messages"); and ``cbba_table = thesis`` where the canonical table converges on the same case (docs/decisions.md
+  "thesis table");
 * ``agreement`` and ``conflict-free``: at convergence on a connected network every live agent holds the same table
-  and no task has more than L_j members (thesis §3.2: the consensus reaches a conflict-free allocation); under
-  ``acbba``, which never resends, not applicable when two agents disagree and the last message between them was
-  lost (docs/decisions.md "lost messages");
+  and no task has more than L_j members (thesis §3.2: the consensus reaches a conflict-free allocation);
 * ``valid groups``: every valid task has exactly L_j members whose equipment covers it, and its prerequisites are
   valid;
 * ``determinism``: the same (config, policy, seed) run again gives byte-identical observations, rewards and infos.
@@ -44,8 +47,12 @@ from taskalloc.evaluation.pool import parallel_map
 from taskalloc.policies import make_policy
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.config import CHOICES
-from taskalloc_env.errors import run_cli
+from taskalloc_env.errors import run_cli, seed_argument
 
+# loss and delay beyond the drawn range: those under which episodes once ended "converged" in disagreement
+HEAVY_FAULTS = ((0.3, 2), (0.5, 4), (1.0, 0))
+THESIS_TABLE = ("the thesis's printed CBBA table (cbba_table = thesis, Table 2.1 cell (m, i)) loops where the "
+                "canonical table converges (docs/decisions.md \"thesis table\")")
 CHECKS = ("spaces", "return", "converged", "agreement", "conflict-free", "valid groups", "determinism")
 POLICIES = ("random", "cbga", "cbga+tb", "cbga+tq", "cbgabi")
 
@@ -65,10 +72,11 @@ def draw_equipment(rng: np.random.Generator, n_tasks: int) -> dict[str, Any]:
                          {"count": n_tasks - first - second, "agents": int(rng.integers(1, 3))}]}
 
 
-def draw_config(rng: np.random.Generator, extra: np.random.Generator) -> dict[str, Any]:
+def draw_config(rng: np.random.Generator, extra: np.random.Generator,
+                faults: np.random.Generator | None = None) -> dict[str, Any]:
     """A random config over every option (small sizes, so that thousands of episodes run in minutes). Pop-up tasks
     and the asynchronous consensus come from ``extra``, a second stream, so the other options of a seed are drawn
-    as before they existed."""
+    as before they existed; heavy faults (``HEAVY_FAULTS``) from ``faults``, a third, when given."""
     n_agents, n_tasks = int(rng.integers(2, 8)), int(rng.integers(2, 10))
     kw: dict[str, Any] = {"n_agents": n_agents, "n_tasks": n_tasks,
                           "start_time_range": [0.0, float(rng.choice([10.0, 30.0, 60.0]))],
@@ -118,6 +126,8 @@ def draw_config(rng: np.random.Generator, extra: np.random.Generator) -> dict[st
         if rng.random() < 0.3:
             kw["dropouts"] = 1
             kw["dropout_rounds"] = [1, 6]
+    if faults is not None and faults.random() < 0.15:
+        kw["message_loss"], kw["max_delay"] = HEAVY_FAULTS[int(faults.integers(len(HEAVY_FAULTS)))]
     return kw
 
 
@@ -129,7 +139,21 @@ def run_case(case: tuple[dict[str, Any], str, int]) -> dict[str, Any]:
     first = _episode(kw, policy, seed, verdict)
     second = _episode(kw, make_policy(name), seed, None)
     verdict["determinism"] = first == second
+    if verdict["converged"] is False and kw.get("cbba_table") == "thesis" and _converges(
+            {**kw, "cbba_table": "canonical"}, name, seed):
+        verdict["converged"], verdict["why"] = None, THESIS_TABLE
     return verdict
+
+
+def _converges(kw: dict[str, Any], name: str, seed: int) -> bool:
+    """Whether the episode converges (the same config, policy and seed)."""
+    policy = make_policy(name)
+    env = TaskAllocEnv(**{**kw, **policy.env_overrides}, reward_scale=10.0, invalid_action="raise")
+    obs, infos = env.reset(seed=seed)
+    policy.start(env, seed)
+    while env.agents:
+        obs, _, _, _, infos = env.step(policy.act({a: obs[a] for a in env.agents}, infos))
+    return env.protocol.converged
 
 
 def _episode(kw: dict[str, Any], policy: Any, seed: int, verdict: dict[str, Any] | None) -> str:
@@ -162,12 +186,12 @@ def _episode(kw: dict[str, Any], policy: Any, seed: int, verdict: dict[str, Any]
         documented = not complete or env.config.acbba_outbid_time == "bump"
         livelock = env.config.asynchronous and documented and protocol.livelocked
         verdict.update({"spaces": spaces_ok, "return": abs(total * env.reward_scale - allocation.score) < 1e-6,
-                        "converged": allocation.converged or livelock})
-        # ACBBA never resends: a disagreement is explained when the last message between the two agents was lost
-        # (its broadcast and every confirmation, docs/decisions.md "lost messages"); otherwise it is a bug
-        at_rest = allocation.globally_converged and connected
-        if at_rest and env.config.asynchronous and _lost_disagreement(protocol, last_lost):
-            at_rest = False
+                        "converged": allocation.converged})
+        if not allocation.converged and _lost_messages_explain(env, last_lost):
+            verdict["converged"], verdict["why"] = None, f"lost messages: {protocol.unresolved}"
+        elif livelock:
+            verdict["converged"], verdict["why"] = None, "ACBBA livelock (docs/decisions.md \"livelock\")"
+        at_rest = allocation.globally_converged and connected       # converged implies agreement (Protocol._decide)
         verdict["agreement"] = allocation.agreement if at_rest else None
         verdict["conflict-free"] = not allocation.conflicts if at_rest else None
         verdict["valid groups"] = _valid_groups(env, allocation)
@@ -189,6 +213,17 @@ def _record_losses(env: TaskAllocEnv) -> np.ndarray:
 
     loss.lost = lost
     return last
+
+
+def _lost_messages_explain(env: TaskAllocEnv, last_lost: np.ndarray) -> bool:
+    """A non-converged episode under message loss that says why (``Protocol.unresolved``): synchronous agents still
+    waiting for a neighbour's message sent after the last change, or tables still changing at the round bound;
+    under ``acbba``, which never resends, two agents disagreeing after the last message between them was lost
+    (docs/decisions.md "lost messages")."""
+    protocol = env.protocol
+    if protocol.unresolved is None or protocol.network.perfect:
+        return False
+    return not env.config.asynchronous or _lost_disagreement(protocol, last_lost)
 
 
 def _lost_disagreement(protocol: Any, last_lost: np.ndarray) -> bool:
@@ -220,10 +255,10 @@ def _valid_groups(env: TaskAllocEnv, allocation: Any) -> bool:
 
 
 def cases(episodes: int, seed: int) -> list[tuple[dict[str, Any], str, int]]:
-    rng, extra = np.random.default_rng(seed), np.random.default_rng([seed, 2])
+    rng, extra, faults = np.random.default_rng(seed), np.random.default_rng([seed, 2]), np.random.default_rng([seed, 3])
     out = []
     for _ in range(episodes):
-        kw = draw_config(rng, extra)
+        kw = draw_config(rng, extra, faults)
         single = kw.get("task_mix") is None and max(np.atleast_1d(kw["agents_per_task"])) == 1
         name = str(rng.choice((*POLICIES, "cbba") if single else POLICIES))
         if single and extra.random() < 0.2:
@@ -239,6 +274,8 @@ def fuzz(episodes: int, seed: int, jobs: int = 1) -> tuple[Counter, list[dict[st
     counts: Counter = Counter()
     failures = []
     for v in verdicts:
+        if v.get("why"):
+            counts[f"not converged: {v['why']}"] += 1
         failed = False
         for check in CHECKS:
             if v[check] is None:
@@ -256,7 +293,7 @@ def fuzz(episodes: int, seed: int, jobs: int = 1) -> tuple[Counter, list[dict[st
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="taskalloc fuzz", description=__doc__.split("\n\n")[0])
     parser.add_argument("--episodes", type=int, default=300, help="random episodes to run (default 300)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the draw of configs, policies and seeds")
+    parser.add_argument("--seed", type=seed_argument, default=0, help="seed of the draw of configs, policies and seeds")
     parser.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes (default: every core)")
     args = parser.parse_args(argv)
     counts, failures = fuzz(args.episodes, args.seed, args.jobs)
@@ -265,6 +302,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parts = [f"{counts[f'{check}: {k}']} {k}" for k in ("passed", "failed", "not applicable")
                  if counts[f"{check}: {k}"]]
         print(f"  {check:<14} {', '.join(parts)}")
+    for key in sorted(k for k in counts if k.startswith("not converged: ")):
+        print(f"  {counts[key]} {key}")
     for v in failures[:10]:
         kw, name, seed = v["case"]
         bad = [c for c in CHECKS if v[c] is False]

@@ -40,7 +40,7 @@ from taskalloc.evaluation.report import markdown_table
 from taskalloc.policies import make_policy, rollout
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.allocation import on_paths
-from taskalloc_env.errors import run_cli
+from taskalloc_env.errors import run_cli, seed_argument
 
 ALGORITHMS = ("cbba", "cbga", "cbgabi")
 MIXES = ([1, 2], [1, 2, 3], [2, 3], [1, 3], [1, 2, 3, 4])
@@ -190,7 +190,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="taskalloc robustness", description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenarios", type=int, default=1000, help="random scenarios per algorithm (default 1000)")
     parser.add_argument("--loss", type=float, default=0.2, help="independent message-loss rate (default 0.2)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the draw of scenarios (default 0)")
+    parser.add_argument("--seed", type=seed_argument, default=0, help="seed of the draw of scenarios (default 0)")
     parser.add_argument("--jobs", type=int, default=default_jobs(), help="worker processes (default: every core)")
     parser.add_argument("--algorithms", default=",".join(ALGORITHMS),
                         help=f"comma-separated, from {', '.join(ALGORITHMS)}")

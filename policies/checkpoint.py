@@ -24,6 +24,8 @@ import dataclasses
 import inspect
 import io
 import json
+import pickle
+import struct
 import warnings
 import zipfile
 from collections.abc import Mapping, Sequence
@@ -33,6 +35,7 @@ from typing import Any
 
 from taskalloc_env.config import PROTOCOL_FIELDS
 from taskalloc_env.errors import ConfigError, run_cli
+from taskalloc_env.resources import check_file, read_bounded
 
 FORMAT, VERSION = "taskalloc-checkpoint", 1
 MAX_JSON_BYTES = 1 << 20
@@ -45,6 +48,8 @@ NOT_POLICY_OPTIONS = ("comm_range", "edge_rule", "max_rounds", "message_loss", "
                       "silence_timeout", "popup_tasks", "popup_period", "popup_arrivals", "popup_times",
                       "mission_time_per_tick", "message_ticks", "build_ticks", "separation_time")
 POLICY_OPTIONS = tuple(name for name in PROTOCOL_FIELDS if name not in NOT_POLICY_OPTIONS)
+MAX_WEIGHT_BYTES = 8 * MAX_PARAMETERS + MAX_JSON_BYTES      # a safetensors file of that many float64 weights
+MAX_ZIP_MEMBERS = 64            # an SB3 zip holds a handful of entries (data, policy.pth, optimizer, versions)
 
 
 class CheckpointError(ConfigError):
@@ -98,12 +103,15 @@ def load(source: str | Path | Traversable, allow_pickle: bool = False) -> Checkp
     if isinstance(source, (str, Path)):
         source = Path(source)
         if source.suffix == ".zip":
+            if not source.is_file():
+                raise CheckpointError(f"no stable-baselines3 zip at {str(source)!r}")
             return _load_sb3_zip(source, allow_pickle)
         if source.is_dir():
             source = source / "model.json"
         elif source.suffix != ".json":
             source = source.with_name(source.name + ".json")
     spec = _read_spec(source)
+    _network(spec, str(source))             # the architecture's size, refused before the weights are read
     weights = source.parent / (source.name[: -len(".json")] + ".safetensors") if isinstance(source, Path) else \
         _sibling(source, ".safetensors")
     return _build(spec, _read_weights(weights), str(source))
@@ -118,12 +126,9 @@ def _sibling(source: Traversable, suffix: str) -> Traversable:
 
 
 def _read_spec(source: Path | Traversable) -> dict[str, Any]:
-    try:
-        raw = source.read_bytes()
-    except (OSError, FileNotFoundError) as exc:
-        raise CheckpointError(f"no checkpoint at {str(source)!r} ({exc.strerror or exc})") from None
-    if len(raw) > MAX_JSON_BYTES:
-        raise CheckpointError(f"{source}: {len(raw)} bytes is too large for a checkpoint description")
+    if isinstance(source, Path) and not source.exists():
+        raise CheckpointError(f"no checkpoint at {str(source)!r} (no such file)")
+    raw = read_bounded(source, MAX_JSON_BYTES, "checkpoint description", CheckpointError)
     try:
         spec = json.loads(raw)
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -136,18 +141,53 @@ def _read_spec(source: Path | Traversable) -> dict[str, Any]:
 
 
 def _read_weights(source: Path | Traversable) -> dict[str, Any]:
+    """The tensors of a safetensors file, its header read first: a file of more than ``MAX_PARAMETERS`` weights
+    (counted from the header's shapes) or more than ``MAX_WEIGHT_BYTES`` bytes is refused before its data is read."""
     from safetensors import SafetensorError
     from safetensors.torch import load
 
+    if isinstance(source, Path) and not source.exists():
+        raise CheckpointError(f"no weights at {str(source)!r} (no such file)")
+    check_file(source, MAX_WEIGHT_BYTES, "weights file", CheckpointError)
     try:
-        return load(source.read_bytes())
-    except (OSError, FileNotFoundError) as exc:
+        with source.open("rb") as fh:
+            head = fh.read(8)
+            size = struct.unpack("<Q", head)[0] if len(head) == 8 else -1
+            header = fh.read(size) if 0 <= size <= MAX_JSON_BYTES else b""
+    except OSError as exc:
         raise CheckpointError(f"no weights at {str(source)!r} ({exc.strerror or exc})") from None
+    weights = _header_weights(header, str(source))
+    if weights > MAX_PARAMETERS:
+        raise CheckpointError(f"{source}: {weights} weights exceed the limit of {MAX_PARAMETERS}")
+    try:
+        return load(read_bounded(source, MAX_WEIGHT_BYTES, "weights file", CheckpointError))
     except SafetensorError as exc:
         raise CheckpointError(f"{source}: not a safetensors file ({exc})") from None
 
 
-def _build(spec: Mapping[str, Any], weights: Mapping[str, Any], where: str) -> Checkpoint:
+def _header_weights(header: bytes, where: str) -> int:
+    """The number of weights a safetensors header declares (its JSON: name → dtype, shape, offsets)."""
+    try:
+        entries = json.loads(header)
+        shapes = [entry["shape"] for name, entry in entries.items() if name != "__metadata__"]
+        if not all(isinstance(d, int) and d >= 0 for shape in shapes for d in shape):
+            raise TypeError("a shape holds something other than sizes")
+    except (UnicodeDecodeError, json.JSONDecodeError, AttributeError, KeyError, TypeError) as exc:
+        raise CheckpointError(f"{where}: not a safetensors file (header: {exc})") from None
+    total = 0
+    for shape in shapes:
+        count = 1
+        for d in shape:
+            count *= d
+        total += count
+    return total
+
+
+def _network(spec: Mapping[str, Any], where: str) -> tuple[type, dict[str, int]]:
+    """The network class and integer sizes a description asks for, refused when the network would exceed
+    ``MAX_PARAMETERS`` weights: it is built on torch's ``meta`` device (shapes, no storage) and counted."""
+    import torch as th
+
     from taskalloc.policies.networks import NETWORKS, count_parameters
 
     network = spec.get("network")
@@ -161,6 +201,20 @@ def _build(spec: Mapping[str, Any], weights: Mapping[str, Any], where: str) -> C
     for key, value in config.items():
         if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_SIZE:
             raise CheckpointError(f"{where}: network config {key}={value!r} is not an integer in 1..{MAX_SIZE}")
+    try:
+        with th.device("meta"):
+            planned = count_parameters(cls(**config))
+    except (ValueError, AssertionError, RuntimeError) as exc:
+        raise CheckpointError(f"{where}: network {network['class']} {config} cannot be built ({exc})") from None
+    if planned > MAX_PARAMETERS:
+        raise CheckpointError(f"{where}: {network['class']} {config} would have {planned} weights, more than the "
+                              f"limit of {MAX_PARAMETERS}")
+    return cls, config
+
+
+def _build(spec: Mapping[str, Any], weights: Mapping[str, Any], where: str) -> Checkpoint:
+    cls, config = _network(spec, where)
+    network = spec["network"]
     bad = sorted(k for k, v in weights.items() if v.is_floating_point() and not bool(v.isfinite().all()))
     if bad:
         raise CheckpointError(f"{where}: weights {bad} hold NaN or infinite values")
@@ -168,8 +222,6 @@ def _build(spec: Mapping[str, Any], weights: Mapping[str, Any], where: str) -> C
     if expected > MAX_PARAMETERS:
         raise CheckpointError(f"{where}: {expected} weights exceed the limit of {MAX_PARAMETERS}")
     actor = cls(**config)
-    if count_parameters(actor) > MAX_PARAMETERS:
-        raise CheckpointError(f"{where}: the network would have more than {MAX_PARAMETERS} weights")
     try:
         actor.load_state_dict(dict(weights), strict=True)
     except RuntimeError as exc:
@@ -196,16 +248,41 @@ def _names(value: Any) -> bool:
 
 # -- stable-baselines3 zips ------------------------------------------------------------------------------------------
 def _zip_json_and_weights(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The ``data`` JSON (as text, nothing unpickled) and the ``policy.pth`` state dict (``weights_only``)."""
+    """The ``data`` JSON (as text, nothing unpickled) and the ``policy.pth`` state dict (``weights_only``); the zip
+    (its size, its number of entries and the unpacked size of the two it reads) is checked before anything is
+    unpacked."""
     import torch as th
 
+    check_file(path, MAX_WEIGHT_BYTES + MAX_JSON_BYTES, "stable-baselines3 zip", CheckpointError)
     try:
         with zipfile.ZipFile(path) as archive:
-            data = json.loads(archive.read("data"))
-            state = th.load(io.BytesIO(archive.read("policy.pth")), map_location="cpu", weights_only=True)
-    except (OSError, KeyError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
+            data = json.loads(_zip_member(archive, "data", MAX_JSON_BYTES, path))
+            weights = _zip_member(archive, "policy.pth", MAX_WEIGHT_BYTES, path)
+    except (OSError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise CheckpointError(f"{path}: not a stable-baselines3 checkpoint ({exc})") from None
+    try:
+        state = th.load(io.BytesIO(weights), map_location="cpu", weights_only=True)
+    except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError) as exc:   # torch's refusals of policy.pth
+        raise CheckpointError(f"{path}: policy.pth is not a state dict of tensors (torch's weights-only reader "
+                              f"refused it: {type(exc).__name__})") from None
+    if not isinstance(data, dict) or not isinstance(state, dict):
+        raise CheckpointError(f"{path}: not a stable-baselines3 checkpoint (data must be a JSON object and "
+                              "policy.pth a state dict)")
     return data, state
+
+
+def _zip_member(archive: zipfile.ZipFile, name: str, limit: int, path: Path) -> bytes:
+    """One entry of a zip of at most ``MAX_ZIP_MEMBERS`` entries, refused when it unpacks to more than ``limit``
+    bytes (its size from the zip's directory; the read stops there too)."""
+    members = archive.infolist()
+    if len(members) > MAX_ZIP_MEMBERS:
+        raise CheckpointError(f"{path}: {len(members)} entries; a stable-baselines3 zip has at most "
+                              f"{MAX_ZIP_MEMBERS}")
+    info = archive.getinfo(name)
+    if info.file_size > limit:
+        raise CheckpointError(f"{path}: entry {name!r} unpacks to {info.file_size} bytes; the limit is {limit}")
+    with archive.open(info) as fh:
+        return fh.read(limit + 1)
 
 
 def sb3_zip_to_checkpoint(path: Path) -> Checkpoint:
@@ -271,10 +348,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     convert = sub.add_parser("convert", help="an SB3 zip of this project → a checkpoint (no unpickling)")
     convert.add_argument("zip", type=Path, help="the stable-baselines3 .zip")
     convert.add_argument("out", type=Path, help="the checkpoint stem to write (OUT.json, OUT.safetensors)")
+    convert.add_argument("--overwrite", action="store_true", help="replace an existing checkpoint at OUT")
     show = sub.add_parser("show", help="print a checkpoint's description")
     show.add_argument("path", type=Path, help="the checkpoint (.json, stem or folder)")
     args = parser.parse_args(argv)
     if args.command == "convert":
+        existing = [str(f) for f in (args.out.with_suffix(s) for s in (".json", ".safetensors")) if f.exists()]
+        if existing and not args.overwrite:
+            raise CheckpointError(f"{' and '.join(existing)} already exist(s); pass --overwrite to replace the "
+                                  "checkpoint")
+        if not args.zip.is_file():
+            raise CheckpointError(f"no stable-baselines3 zip at {str(args.zip)!r}")
         ckpt = sb3_zip_to_checkpoint(args.zip)
         written = save(args.out, ckpt.actor, ckpt.own_features, ckpt.task_features, ckpt.env_overrides,
                        {**ckpt.meta, "converted_from": args.zip.name})

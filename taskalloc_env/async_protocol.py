@@ -343,7 +343,13 @@ class AsyncProtocol(Protocol):
             if not (local or self.local):   # nothing relevant can come: each agent declares itself converged later
                 c.local_tick = int(self.quiet_since[live].max(initial=0)) + self.cfg.separation_time + 1
         self.quiet, self.local = self.quiet or quiet, self.local or local
-        self.converged = self.local if self.cfg.local_termination else self.quiet
+        if self.quiet:
+            self._decide(True, "the network went quiet with the agents' tables disagreeing: a lost message is never "
+                               "resent (Johnson §4.1.3), so nothing can change any more")
+            self.converged = self.converged and (self.local or not self.cfg.local_termination)
+        else:
+            self._decide(self.local and self.cfg.local_termination,
+                         "every agent declared local convergence, but the agents' tables disagree")
 
     @property
     def agents_locally_converged(self) -> np.ndarray:
@@ -368,8 +374,14 @@ class AsyncProtocol(Protocol):
         return not self.converged and talking and self.round - self.bundle_tick > self.round // 2
 
     @property
+    def halted(self) -> bool:
+        """The network is quiet and nothing is to come, yet the agents disagree: nothing can change any more."""
+        return self.quiet and self.unresolved is not None
+
+    @property
     def globally_converged(self) -> bool:
-        return self.quiet
+        """The network went quiet (Johnson §4.1.3, l. 921) with every agent holding the same table."""
+        return self.quiet and self.unresolved is None
 
     @property
     def locally_converged(self) -> bool:

@@ -180,14 +180,7 @@ def type_counts(cfg: TaskAllocConfig) -> tuple[int, ...]:
 
 def read_yaml(source: Path | resources.Traversable, what: str = "config file") -> Any:
     """Parse a YAML file; every way it can fail becomes one ``ConfigError`` naming the file (and the line)."""
-    try:
-        if source.is_dir():
-            raise ConfigError(f"{what} {str(source)!r} is a folder, not a YAML file")
-        data = source.read_bytes()
-    except OSError as exc:
-        raise ConfigError(f"{what} {str(source)!r} cannot be read: {exc.strerror or exc}") from None
-    if len(data) > MAX_FILE_BYTES:
-        raise ConfigError(f"{what} {str(source)!r} is {len(data)} bytes; config files are limited to {MAX_FILE_BYTES}")
+    data = resources.read_bounded(source, MAX_FILE_BYTES, what)    # size from stat, refused unread
     try:
         return yaml.safe_load(data.decode("utf-8"))
     except UnicodeDecodeError as exc:

@@ -101,9 +101,10 @@ class StepEngine:
             passed[:] = ~protocol.alive                     # a failed agent takes no further part
 
     def ended(self, max_cycles: int | None = None) -> tuple[bool, bool]:
-        """(terminated, truncated): converged; or not, and ``max_cycles`` steps taken or the round bound reached."""
+        """(terminated, truncated): converged; or not, and ``max_cycles`` steps taken, the round bound reached or the
+        protocol halted (it cannot reach agreement under its faults, ``protocol.unresolved`` says why)."""
         protocol = self.protocol
         terminated = protocol.converged
         truncated = not terminated and ((max_cycles is not None and self.steps >= max_cycles)
-                                        or protocol.round >= protocol.max_rounds)
+                                        or protocol.round >= protocol.max_rounds or protocol.halted)
         return terminated, truncated

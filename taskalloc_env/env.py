@@ -10,10 +10,13 @@ Action space           ``Discrete(1 + 2M)``: 0 pass, 1..M bid on task j−1, M+1
 Observation space      ``Dict(observation=Box(D,) float32, action_mask=Box(0, 1, (1 + 2M,), int8))`` (``dtype``)
 State space            ``Box`` of agent/task attributes, every agent's own bids and the round
 Reward                 cooperative, potential-based: every agent gets Δ team score (÷ ``reward_scale``)
-Termination            the allocation converged (no table changed for D + 1 rounds; our stopping rule; under
-                       ``acbba``: the network went quiet, or every agent converged locally, Johnson §4.1.3)
+Termination            the allocation converged: every live agent agrees (no table changed for D + 1 rounds; our
+                       stopping rule; under ``acbba``: the network went quiet, or every agent converged locally,
+                       Johnson §4.1.3)
 Truncation             the round bound T_max (``max_rounds``), or ``max_cycles`` steps (default: ``step_bound``,
-                       the most steps T_max rounds can take)
+                       the most steps T_max rounds can take); under ``acbba`` also a quiet network whose agents
+                       disagree after lost messages. Infos carry ``unresolved`` when the stopping test passed
+                       without agreement (the reason)
 =====================  ==============================================================================
 
 Each step is one decision per agent in the bundle phase of CBGA (thesis §3.2.2, Alg 5): *bid* on a task (inserted
@@ -224,6 +227,9 @@ class TaskAllocEnv(ParallelEnv):
         terminations = {a: terminated or not alive[index[a]] for a in agents}
         truncations = dict.fromkeys(agents, truncated)
         infos = self._infos(flags)
+        if truncated and protocol.unresolved is not None:     # why the episode ended without convergence
+            for info in infos.values():
+                info["unresolved"] = protocol.unresolved
         if terminated or truncated:
             self._done = True
             self.agents = []

@@ -3,6 +3,7 @@ one way every command line reports them."""
 
 from __future__ import annotations
 
+import argparse
 import sys
 from collections.abc import Callable
 
@@ -23,3 +24,14 @@ def run_cli(main: Callable[[], object]) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     return result if isinstance(result, int) else 0
+
+
+def seed_argument(text: str) -> int:
+    """An argparse ``type`` for seeds: a non-negative integer (numpy's seeding refuses negative ones)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a seed is a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed is a non-negative integer, got {value}")
+    return value

@@ -6,7 +6,8 @@ phase (thesis §3.2.3 and §5.2.2):
 
     T += 1; exchange (consensus.exchange, Alg 6); outbid release (thesis §2.2.4, Johnson eqs. (3.11)–(3.12));
     quit timers (Alg 9 l. 4–5); convergence: no table or bundle changed for D + 1 consecutive rounds (and no quit
-    timer still running) -- our stopping rule: the thesis gives none for detecting convergence (docs/decisions.md).
+    timer still running) and every live agent agreeing -- our stopping rule: the thesis gives none for detecting
+    convergence (docs/decisions.md).
 
 Pop-up tasks (``releases``, any consensus mode): a task is invisible, and cannot be bid on, before its release
 round; a release counts as a change, and the run has not converged while a release is still to come.
@@ -138,10 +139,11 @@ class Protocol:
         self.alive = np.ones(s.n_agents, dtype=bool)
         self.live_graph = self.graph
         self.dropouts = dropout_schedule(self.cfg, s.n_agents, self.max_rounds, self.rng)
-        self.last_heard = np.zeros((s.n_agents, s.n_agents), dtype=np.int64)   # round i last received from k
+        self.last_heard = np.zeros((s.n_agents, s.n_agents), dtype=np.int64)   # latest send round i received from k
         self._snapshots: dict[int, Snapshot] = {}
         self.stable_rounds = 0
         self.converged = False
+        self.unresolved: str | None = None      # why the stopping test passed without agreement (None: it did not)
         self._paths = PathTable.empty(s.n_agents, s.n_tasks)
         self._gain = np.zeros((s.n_agents, s.n_tasks))
         self._slot = np.full((s.n_agents, s.n_tasks), -1, dtype=np.int64)
@@ -319,7 +321,7 @@ class Protocol:
         traffic = exchange(kn, deliveries, self._snapshots, self.round, self.scenario.task_agents, self.equipment,
                            self.cfg.cbba_table)
         self._count_seen_quits(listing)
-        self.last_heard[deliveries.receiver, deliveries.sender] = self.round
+        np.maximum.at(self.last_heard, (deliveries.receiver, deliveries.sender), deliveries.sent)
         oldest = min(self.network.in_flight(), default=self.round)
         self._snapshots = {r: v for r, v in self._snapshots.items() if r >= oldest}
         self._forget_silent()
@@ -346,8 +348,18 @@ class Protocol:
         self._last_groups = kn.groups.copy()
         self._last_bundles = [list(b) for b in kn.bundles]
         self.stable_rounds = 0 if changed or self._quit_pending(counts) else self.stable_rounds + 1
-        self.converged = (self.stable_rounds >= self.live_graph.diameter + 1 and self._settled()
-                          and bool(self.released.all()))
+        stable = self.stable_rounds >= self.live_graph.diameter + 1 and bool(self.released.all())
+        if stable and not self._settled():
+            self.converged = False
+            self.unresolved = ("no table changed for D + 1 rounds, but an agent has not received a message its "
+                               "neighbour sent after the last change (lost or delayed messages), or still counts "
+                               "on a failed agent")
+        else:
+            self._decide(stable, "no table changed for D + 1 rounds, but the agents' tables disagree")
+        if (not self.converged and self.unresolved is None and self.round >= self.max_rounds
+                and not (self.network.perfect and not self.dropouts)):
+            self.unresolved = ("the round bound T_max came while the tables were still changing (lost or delayed "
+                               "messages, or failed agents)")
         self._touch()
         return traffic
 
@@ -373,6 +385,19 @@ class Protocol:
             del self._pending_quits[keys[q]]
         self.counters.quits_seen += int(seen.sum())
 
+    def _decide(self, stopped: bool, disagreement: str) -> None:
+        """Converged: the stopping test passed and the agents agree (thesis §2.2.3: the two phases alternate "until
+        assignments and consensus are achieved"); a stopping test passed without agreement is not convergence, and
+        ``unresolved`` says why (under lost or delayed messages; docs/decisions.md "Convergence means agreement")."""
+        agreed = stopped and self.agreement()
+        self.converged = agreed
+        self.unresolved = disagreement if stopped and not agreed else None
+
+    @property
+    def halted(self) -> bool:
+        """Nothing can change any more and the agents disagree (synchronous agents keep broadcasting: never)."""
+        return False
+
     @property
     def globally_converged(self) -> bool:
         """The synchronous stop is global (no table changed for D + 1 rounds); see ``AsyncProtocol`` for local."""
@@ -392,7 +417,8 @@ class Protocol:
         return bool(due.any())
 
     def _settled(self) -> bool:
-        """Every live agent has heard each live neighbour since the last change, no older message is still
+        """Every live agent has received a message each live neighbour sent after the last change (a delayed message
+        sent before it carries the old table, so its send round counts, not its arrival), no older message is still
         travelling, and no live agent still counts on a failed one (always true on perfect links, where everyone
         hears everyone in every round and nobody fails)."""
         if self.network.perfect and not self.dropouts:

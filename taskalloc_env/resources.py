@@ -11,7 +11,9 @@ Anything else — a path with a folder or a suffix — is a path and must be giv
 
 from __future__ import annotations
 
+import os
 import re
+import stat
 from importlib import resources
 from importlib.resources.abc import Traversable
 from pathlib import Path
@@ -67,3 +69,39 @@ def named(kind: str, name: str, suffix: str = ".yaml") -> Traversable:
     if not (node.is_dir() if not suffix else node.is_file()):
         raise ConfigError(f"unknown {what} {name!r}; known: {names(kind, suffix)}")
     return node
+
+
+def check_file(source: Path | Traversable, limit: int, what: str, error: type[ConfigError] = ConfigError) -> None:
+    """Refuse, unopened, a path that is not a regular file (a device such as ``/dev/zero``, a named pipe, a socket,
+    reached directly or through a symlink) or whose size (from ``stat``) exceeds ``limit`` bytes. A resource inside
+    an installed package is not a path and is only bounded by the read (``read_bounded``)."""
+    if not isinstance(source, Path):
+        return
+    name = str(source)
+    try:
+        info = os.stat(source)
+    except OSError as exc:
+        raise error(f"{what} {name!r} cannot be read: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(info.st_mode):
+        kind = "a folder, not a file" if stat.S_ISDIR(info.st_mode) else "not a regular file (a device, pipe or socket)"
+        raise error(f"{what} {name!r} is {kind}")
+    if info.st_size > limit:
+        raise error(f"{what} {name!r} is {info.st_size} bytes; the limit is {limit}")
+
+
+def read_bounded(source: Path | Traversable, limit: int, what: str,
+                 error: type[ConfigError] = ConfigError) -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes, checked before it is read (``check_file``).
+
+    The read itself stops at ``limit + 1`` bytes, so a file that grows in between is refused too, never read whole.
+    Raises ``error`` (a ``ConfigError``) naming ``what`` and the file.
+    """
+    check_file(source, limit, what, error)
+    try:
+        with source.open("rb") as fh:
+            data = fh.read(limit + 1)
+    except OSError as exc:
+        raise error(f"{what} {str(source)!r} cannot be read: {exc.strerror or exc}") from None
+    if len(data) > limit:
+        raise error(f"{what} {str(source)!r} is more than {limit} bytes; the limit is {limit}")
+    return data

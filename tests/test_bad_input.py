@@ -120,7 +120,7 @@ def test_a_million_agents_are_refused_before_allocating():
 YAML_FILES: dict[str, tuple[bytes | None, tuple[str, ...]]] = {
     "parse error": (b"n_agents: 4\nn_tasks: [1, 2\nspeed: 3\n", ("is not valid YAML", "line 3, column 6")),
     "non-UTF-8": (b"n_agents: 4\nname: \"\xff\xfe\"\n", ("is not UTF-8 text", "byte 19")),
-    "folder": (None, ("is a folder, not a YAML file",)),
+    "folder": (None, ("is a folder, not a file",)),
     "deep nesting": (b"a: " + b"[" * 1000 + b"]" * 1000 + b"\n", ("nests too deeply",)),
     "unknown key": (b"n_agents: 4\nspeeed: 2\n", ("unknown config field 'speeed' (did you mean 'speed'?)",)),
     "not a mapping": (b"- 1\n- 2\n", ("must hold a mapping of config fields", "list")),

@@ -21,7 +21,7 @@ from taskalloc.evaluation.stats import (
     share_tied,
     wilcoxon_pvalue,
 )
-from taskalloc_env import TaskAllocEnv, resolve_config, resources
+from taskalloc_env import ConfigError, TaskAllocEnv, resolve_config, resources
 
 SMALL = {"n_agents": 4, "n_tasks": 6, "agents_per_task": 2, "start_time_range": [0.0, 30.0]}
 
@@ -131,7 +131,8 @@ episodes: 3
 def test_quick_run_writes_every_output_and_report_rebuilds_it(tmp_path):
     out = tmp_path / "out"
     docs = tmp_path / "results.md"
-    docs.write_text("# Results\n\nHand-written text stays.\n")
+    docs.write_text("# Results\n\nHand-written text stays.\n\n<!-- results:suite:start -->\n"
+                    "<!-- results:suite:end -->\n")
     argv = ["run", "fig5_16_l4", "--quick", "--out", str(out), "--jobs", "1", "--no-progress", "--docs", str(docs)]
     assert experiments.main(argv) == 0
     target = out / "fig5_16_l4"
@@ -146,7 +147,9 @@ def test_quick_run_writes_every_output_and_report_rebuilds_it(tmp_path):
     text = docs.read_text()
     assert "Hand-written text stays." in text and "<!-- results:fig5_16_l4:start -->" in text
     table = (target / "table.md").read_text()
-    assert experiments.main(["report", "fig5_16_l4", "--out", str(out), "--docs", str(docs)]) == 0
+    with pytest.raises(ConfigError, match="already holds the results of fig5_16_l4"):
+        experiments.main(["report", "fig5_16_l4", "--out", str(out), "--docs", str(docs)])
+    assert experiments.main(["report", "fig5_16_l4", "--out", str(out), "--docs", str(docs), "--overwrite"]) == 0
     assert (target / "table.md").read_text() == table               # the CSV holds everything the report needs
     assert docs.read_text().count("<!-- results:fig5_16_l4:start -->") == 1
 

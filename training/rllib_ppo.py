@@ -44,7 +44,7 @@ from taskalloc.training.config import plain, prepare_out_dir
 from taskalloc.training.rllib_module import NETWORKS, TaskAllocRLModule
 from taskalloc_env.config import PROTOCOL_FIELDS, resolve_config
 from taskalloc_env.env import TaskAllocEnv
-from taskalloc_env.errors import ConfigError, run_cli
+from taskalloc_env.errors import ConfigError, run_cli, seed_argument
 from taskalloc_env.taskalloc_v0 import parallel_env
 from taskalloc_env.wrappers.rllib import RLlibObservations
 
@@ -168,7 +168,10 @@ def export_checkpoint(args: argparse.Namespace) -> Path:
 
 
 def _mapping(text: str) -> dict[str, Any]:
-    value = yaml.safe_load(text)
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError as exc:                   # a tag such as !!python/object, or a parse error
+        raise argparse.ArgumentTypeError(f"not a plain YAML mapping ({str(exc).splitlines()[0]})") from None
     if not isinstance(value, dict):
         raise argparse.ArgumentTypeError(f"expected a YAML mapping such as '{{task_quitting: true}}', got {text!r}")
     return value
@@ -198,7 +201,7 @@ def main(argv: Sequence[str] | None = None) -> Any:
                      help="remote EnvRunner actors (default 0: sample in this process; raise on a cluster)")
     run.add_argument("--envs-per-runner", type=int, default=4, help="env copies per EnvRunner (default 4)")
     run.add_argument("--max-cycles", type=int, default=200, help="steps before an episode is truncated")
-    run.add_argument("--seed", type=int, default=0, help="RLlib's seed (default 0)")
+    run.add_argument("--seed", type=seed_argument, default=0, help="RLlib's seed (default 0)")
     run.add_argument("--eval-episodes", type=int, default=50,
                      help="validation instances the exported model is scored on (default 50)")
     for p in (run, sub.add_parser("export", help="an RLlib checkpoint of this module → a project checkpoint")):
