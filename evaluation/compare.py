@@ -60,14 +60,19 @@ def learned_checkpoints() -> list[str]:
     return [name for name in DEFAULT_LEARNED if (resources.folder("models") / name / "model.json").is_file()]
 
 
+def start_on(solver: str, cfg: TaskAllocConfig) -> None:
+    """Load ``solver``'s policy and start it on ``cfg``'s first instance (raises what loading or starting raises)."""
+    policy = policy_for(solver)
+    env = TaskAllocEnv(cfg, **policy.env_overrides)
+    env.reset(seed=0)
+    policy.start(env, 0)
+
+
 def usable_learned(source: str, cfg: TaskAllocConfig) -> tuple[str | None, str]:
     """(solver name, '') if the checkpoint loads and fits ``cfg``'s observations, else (None, why not)."""
     solver = f"learned:{source}"
     try:
-        policy = policy_for(solver)
-        env = TaskAllocEnv(cfg, **policy.env_overrides)
-        env.reset(seed=0)
-        policy.start(env, 0)
+        start_on(solver, cfg)
     except ImportError as exc:
         return None, f"it needs the learned extra: pip install taskalloc[learned] ({exc})"
     except CheckpointError as exc:
@@ -81,10 +86,7 @@ def chosen_policy(name: str, cfg: TaskAllocConfig) -> str:
     """A ``--policy`` row: a policy name or a user's import path (``mypkg.mymodule:MyPolicy``) that loads and starts on
     ``cfg``; else a ``ConfigError`` naming it (the user asked for this row, so it is not skipped)."""
     try:
-        policy = policy_for(name)
-        env = TaskAllocEnv(cfg, **policy.env_overrides)
-        env.reset(seed=0)
-        policy.start(env, 0)
+        start_on(name, cfg)
     except ValueError as exc:
         raise ConfigError(f"--policy: {exc}") from None
     return name
