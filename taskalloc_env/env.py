@@ -67,8 +67,9 @@ from taskalloc_env.async_protocol import AsyncProtocol
 from taskalloc_env.config import TaskAllocConfig, episode_bound, max_required_agents, resolve_config
 from taskalloc_env.engine import StepEngine
 from taskalloc_env.errors import ConfigError, InvalidActionError
+from taskalloc_env.memory import check_memory
 from taskalloc_env.observation import ObservationBuilder, state_vector
-from taskalloc_env.protocol import Protocol, check_memory
+from taskalloc_env.protocol import Protocol
 from taskalloc_env.render import ansi_table, figure, rgb_array
 from taskalloc_env.scenario import Scenario, generate, scenario_config
 

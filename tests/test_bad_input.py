@@ -26,7 +26,7 @@ from taskalloc.policies.checkpoint import CheckpointError
 from taskalloc.policies.learned import LearnedPolicy
 from taskalloc_env import Agent, ConfigError, Scenario, Task, TaskAllocEnv, resolve_config
 from taskalloc_env.errors import run_cli
-from taskalloc_env.protocol import check_memory
+from taskalloc_env.memory import check_memory
 
 ROOT = Path(__file__).resolve().parent.parent
 NAN, INF = float("nan"), float("inf")

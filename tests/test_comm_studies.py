@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from taskalloc.evaluation import dropout, experiments, figures, robustness
+from taskalloc.evaluation import dropout, experiment_files, experiment_reports, experiments, figures, robustness
 from taskalloc.evaluation.episodes import Episode, _env, run_episode
 from taskalloc.evaluation.report import cell_text, values
 from taskalloc.policies import make_policy, rollout
@@ -44,16 +44,16 @@ def test_yes_no_metrics_read_from_csv_and_show_as_shares():
 
 
 def test_marks_find_the_first_point_reaching_the_share():
-    points = [experiments.Point(str(r), r, {"comm_range": r}) for r in (1.0, 2.0, 3.0)]
+    points = [experiment_files.Point(str(r), r, {"comm_range": r}) for r in (1.0, 2.0, 3.0)]
     rows = [{"point": str(r), "series": "A", "seed": k, "connected": k < share * 4, "converged": True}
             for r, share in ((1.0, 0.0), (2.0, 0.5), (3.0, 1.0)) for k in range(4)]
-    exp = experiments.Experiment(
+    exp = experiment_files.Experiment(
         name="x", title="x", source="", scenario="default", overrides={}, xlabel="r", points=points,
-        series=[experiments.Series("A", "cbga", {})], baseline=None, metrics=["score"], episodes=4, headline=[],
+        series=[experiment_files.Series("A", "cbga", {})], baseline=None, metrics=["score"], episodes=4, headline=[],
         published="", checks=[], quick_points=points, quick_episodes=1, raw={},
-        marks=[experiments.Mark("connected", 0.5, "half"), experiments.Mark("connected", 1.0, "all"),
-               experiments.Mark("fully_connected", 0.5, "never")])
-    found = experiments.mark_points(exp, experiments.cells_of(rows), points)
+        marks=[experiment_files.Mark("connected", 0.5, "half"), experiment_files.Mark("connected", 1.0, "all"),
+               experiment_files.Mark("fully_connected", 0.5, "never")])
+    found = experiment_reports.mark_points(exp, experiment_reports.cells_of(rows), points)
     assert [(m.label, p.label if p else None) for m, p in found] == [("half", "2.0"), ("all", "3.0"),
                                                                      ("never", None)]
 
@@ -72,7 +72,7 @@ episodes: 3
 marks: [{metric: connected, share: 0.5}]
 reference: {point: "0.0", metrics: [score, rounds]}
 """)
-    exp = experiments.load_experiment(path)
+    exp = experiment_files.load_experiment(path)
     assert exp.reference.point.label == "0.0" and exp.marks[0].metric == "connected"
     target = experiments.run_experiment(exp, tmp_path / "out", jobs=1, progress=False)
     table = (target / "table.md").read_text()
@@ -94,7 +94,7 @@ def test_bad_marks_and_references_fail_early(tmp_path):
         path = tmp_path / "x.yaml"
         path.write_text(base + extra)
         with pytest.raises(ValueError, match=message):
-            experiments.load_experiment(path)
+            experiment_files.load_experiment(path)
 
 
 def test_data_per_agent_per_assignment_divides_by_the_required_assignments():
@@ -106,8 +106,8 @@ def test_data_per_agent_per_assignment_divides_by_the_required_assignments():
 def test_new_experiment_files_are_in_the_suite():
     names = set(experiments.experiment_paths([], every=True))
     assert {"fig4_6_7_range", "fig4_8_10_data", "fig5_10_delta_range", "comm_loss", "comm_dropout"} <= names
-    assert experiments.load_experiment("fig4_6_7_range").marks
-    assert experiments.load_experiment("comm_loss").reference.point.label == "0.0"
+    assert experiment_files.load_experiment("fig4_6_7_range").marks
+    assert experiment_files.load_experiment("comm_loss").reference.point.label == "0.0"
 
 
 # -- the links figure ------------------------------------------------------------------------------------------------

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from taskalloc.evaluation import experiments
+from taskalloc.evaluation import experiment_files, experiment_reports, experiments
 from taskalloc.evaluation.episodes import Episode, check_pairing, fingerprint, run_episode, run_episodes
 from taskalloc.evaluation.stats import (
     ci95_half,
@@ -116,7 +116,7 @@ series: [cbga, cbgabi]
 baseline: CBGA
 episodes: 3
 """)
-    exp = experiments.load_experiment(path)
+    exp = experiment_files.load_experiment(path)
     target = experiments.run_experiment(exp, tmp_path / "out", jobs=1, progress=False)
     rows = _rows(target / "episodes.csv")
     assert len(rows) == 6                                           # nothing dropped
@@ -138,7 +138,7 @@ def test_quick_run_writes_every_output_and_report_rebuilds_it(tmp_path):
     target = out / "fig5_16_l4"
     for name in ("episodes.csv", "table.md", "config.yaml", "run.json", "score.png", "headline_10.png"):
         assert (target / name).stat().st_size > 0, name
-    exp = experiments.load_experiment("fig5_16_l4")
+    exp = experiment_files.load_experiment("fig5_16_l4")
     rows = _rows(target / "episodes.csv")
     assert len(rows) == len(exp.quick_points) * len(exp.series) * exp.quick_episodes
     assert {r["solver"] for r in rows} == {"CBGA", "CBGA+TQ", "CBGA+TB", "CBGABI", "SGAMA"}
@@ -155,20 +155,20 @@ def test_quick_run_writes_every_output_and_report_rebuilds_it(tmp_path):
 
 
 def test_every_experiment_file_loads_and_covers_the_published_experiments():
-    names = {experiments.load_experiment(name).name for name in resources.names("experiments")}
+    names = {experiment_files.load_experiment(name).name for name in resources.names("experiments")}
     for required in ("fig3_11_cbba_vs_cbga", "fig3_17_sgama_agents", "fig5_11_l_sweep", "fig5_16_l4",
                      "fig5_7_13_all_l10", "fig3_23_heterogeneous", "fig3_25_prerequisites", "optimality_gap"):
         assert required in names
-    assert experiments.load_experiment("fig5_16_l4").episodes == 100
+    assert experiment_files.load_experiment("fig5_16_l4").episodes == 100
 
 
 def test_bad_experiment_files_fail_early(tmp_path):
     with pytest.raises(ValueError, match="unknown keys"):
-        experiments.load_experiment(_write(tmp_path, "name: x\nsereis: [cbga]\n"))
+        experiment_files.load_experiment(_write(tmp_path, "name: x\nsereis: [cbga]\n"))
     with pytest.raises(ValueError, match="not a series label"):
-        experiments.load_experiment(_write(tmp_path, "name: x\nseries: [cbga]\nbaseline: CBBA\n"))
+        experiment_files.load_experiment(_write(tmp_path, "name: x\nseries: [cbga]\nbaseline: CBBA\n"))
     with pytest.raises(ValueError, match="both set"):
-        experiments.load_experiment(_write(tmp_path, """
+        experiment_files.load_experiment(_write(tmp_path, """
 name: x
 sweep: {field: agents_per_task, values: [1, 2]}
 series: [{solver: cbga, overrides: {agents_per_task: 3}}]
@@ -176,21 +176,21 @@ series: [{solver: cbga, overrides: {agents_per_task: 3}}]
 
 
 def test_checks_test_the_claim_on_paired_cells():
-    points = [experiments.Point("10", 10, {"n_agents": 10})]
+    points = [experiment_files.Point("10", 10, {"n_agents": 10})]
     rows = [{"point": "10", "series": s, "seed": k, "score": v, "converged": True}
             for k in range(8) for s, v in (("A", 100 + k + (k % 3)), ("B", 90 + k))]
-    cells = experiments.cells_of(rows)
+    cells = experiment_reports.cells_of(rows)
 
     def verdict(test: str, **kw) -> str:
-        return experiments.evaluate_check(experiments.Check("c", "A", "B", test, **kw), cells, points)[1]
+        return experiment_reports.evaluate_check(experiment_files.Check("c", "A", "B", test, **kw), cells, points)[1]
 
     assert verdict("greater") == "yes"
     assert verdict("less") == "no"
     assert verdict("same") == "no"
     assert verdict("ratio_above", ratio=1.05) == "yes"
     assert verdict("ratio_above", ratio=1.5) == "no"
-    check = experiments.Check("c", "A", "B", "greater", at=({"n_agents": 5},))
-    assert experiments.evaluate_check(check, cells, points)[1] == "n/a"
+    check = experiment_files.Check("c", "A", "B", "greater", at=({"n_agents": 5},))
+    assert experiment_reports.evaluate_check(check, cells, points)[1] == "n/a"
 
 
 # -- δ reaches the quitting policies; grid sweeps and heat maps ------------------------------------------------------
@@ -235,14 +235,14 @@ episodes: 2
 headline: ["3 × 4"]
 heatmap: {baseline: CBBA, series: [duo, CBGA], difference: [CBGA, duo]}
 """)
-    exp = experiments.load_experiment(path)
+    exp = experiment_files.load_experiment(path)
     assert [p.label for p in exp.points] == ["2 × 3", "2 × 4", "3 × 3", "3 × 4"]
     assert exp.points[1].overrides == {"n_agents": 2, "n_tasks": 4}
     docs = tmp_path / "results.md"
     target = experiments.run_experiment(exp, tmp_path / "out", jobs=1, progress=False, docs=docs)
     for name in ("heatmap_duo_over_CBBA.png", "heatmap_CBGA_over_CBBA.png", "heatmap_CBGA_minus_duo.png"):
         assert (target / name).stat().st_size > 0
-    rows, cols, maps = experiments.heatmap_maps(exp, experiments.cells_of(_rows(target / "episodes.csv")),
+    rows, cols, maps = experiment_reports.heatmap_maps(exp, experiment_reports.cells_of(_rows(target / "episodes.csv")),
                                                 exp.points)
     assert (rows, cols) == ([2, 3], [3, 4])
     np.testing.assert_allclose(maps["CBGA minus duo"], maps["CBGA over CBBA"] - maps["duo over CBBA"])
@@ -250,7 +250,8 @@ heatmap: {baseline: CBBA, series: [duo, CBGA], difference: [CBGA, duo]}
     assert "duo over CBBA" in block and "comm steps (end) | comm steps (agreement)" in block
     assert "**Ours, score** (mean ± sd)" not in block          # the maps replace the per-point tables in the docs
     with pytest.raises(ValueError, match="grid of two fields"):
-        experiments.load_experiment(_write(tmp_path, "name: x\nseries: [cbba]\nheatmap: {baseline: CBBA, series: []}"))
+        experiment_files.load_experiment(_write(tmp_path,
+                                                "name: x\nseries: [cbba]\nheatmap: {baseline: CBBA, series: []}"))
 
 
 def test_a_heatmap_grid_takes_a_reference_point_but_no_marks(tmp_path):
@@ -267,7 +268,7 @@ episodes: 2
 heatmap: {baseline: CBGA, series: [CBGABI]}
 reference: {point: "3 × 3", metrics: [score]}
 """
-    exp = experiments.load_experiment(_write(tmp_path, text))
+    exp = experiment_files.load_experiment(_write(tmp_path, text))
     assert exp.heatmap is not None and exp.reference.point.label == "3 × 3" and not exp.marks
     docs = tmp_path / "results.md"
     target = experiments.run_experiment(exp, tmp_path / "out", jobs=1, progress=False, docs=docs)
@@ -277,4 +278,4 @@ reference: {point: "3 × 3", metrics: [score]}
     assert "CBGABI over CBGA" in block and "paired against n_agents × n_tasks = 3 × 3" in block
     assert "Paired against n_agents × n_tasks = 3 × 3 (score" in (target / "table.md").read_text()
     with pytest.raises(ValueError, match="marks"):
-        experiments.load_experiment(_write(tmp_path, text + "marks: [{metric: connected}]\n"))
+        experiment_files.load_experiment(_write(tmp_path, text + "marks: [{metric: connected}]\n"))

@@ -18,7 +18,7 @@ from taskalloc_env.config import FACTS, FIELD_GROUPS, TaskAllocConfig
 from taskalloc_env.faults import GilbertElliott
 from taskalloc_env.fields import render_docs, table
 from taskalloc_env.generators import GENERATORS, register_generator
-from taskalloc_env.protocol import memory_estimate
+from taskalloc_env.memory import memory_estimate
 from taskalloc_env.scenario import uniform
 
 ROOT = Path(__file__).resolve().parents[1]

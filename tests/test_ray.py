@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch as th
 
-from taskalloc.evaluation import compare, experiments
+from taskalloc.evaluation import compare, experiment_files, experiments
 from taskalloc.policies.learned import LearnedPolicy
 from taskalloc.policies.networks import masked_logits
 from taskalloc_env import TaskAllocEnv
@@ -60,7 +60,7 @@ def test_ray_backend_writes_the_local_backends_tables(tmp_path, local_ray):
     for backend in ("local", "ray"):
         compare.compare("train_small", 4, {}, jobs=2, out=tmp_path / backend, learned=["train_small"],
                         backend=backend)
-        exp = experiments.load_experiment("fig5_16_l4")
+        exp = experiment_files.load_experiment("fig5_16_l4")
         experiments.run_experiment(exp, tmp_path / backend / "exp", jobs=2, quick=True, progress=False,
                                    backend=backend)
     for name in ("compare.md", "compare.csv", "episodes.csv", "exp/fig5_16_l4/table.md",
