@@ -30,7 +30,7 @@ from taskalloc.evaluation.episodes import default_jobs, policy_for
 from taskalloc.evaluation.suite_episodes import ROW_FIELDS, play_task
 from taskalloc.evaluation.suite_reference import load_reference, means, write_reference
 from taskalloc_env.errors import ConfigError, InvalidActionError
-from taskalloc_env.suite import SUITE, TASKS, task
+from taskalloc_env.suite import SUITE, TASKS, cards, task
 
 FILES = ("episodes.csv", "summary.json", "summary.md", "marl_eval.json")
 
@@ -114,6 +114,25 @@ def markdown(summary: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def leaderboard(folders: Sequence[Path]) -> str:
+    """One row per benchmarked policy (its ``summary.json``), one column per task: normalised scores, then the IQM."""
+    summaries = []
+    for folder in folders:
+        path = folder / "summary.json"
+        if not path.is_file():
+            raise ConfigError(f"--leaderboard: {str(folder)!r} holds no summary.json")
+        summaries.append(json.loads(path.read_text(encoding="utf-8")))
+    task_ids = list(dict.fromkeys(t for s in summaries for t in s["tasks"]))
+    names = [t.split("/", 1)[-1].removesuffix(f"-{SUITE}") for t in task_ids]
+    lines = ["| policy | IQM [95 % CI] | " + " | ".join(names) + " |", "|---|---|" + "---:|" * len(names)]
+    for s in sorted(summaries, key=lambda s: -s["aggregate"]["iqm"]):
+        agg = s["aggregate"]
+        cells = [f"{s['tasks'][t]['normalised']:.2f}" if t in s["tasks"] else "–" for t in task_ids]
+        lines.append(f"| {s['policy']} | {agg['iqm']:.2f} [{agg['iqm_ci95'][0]:.2f}, {agg['iqm_ci95'][1]:.2f}] | "
+                     + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def write(out: Path, summary: dict[str, Any], rows: Sequence[dict[str, Any]]) -> None:
     """The four files of ``FILES`` in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
@@ -152,6 +171,9 @@ def parser() -> argparse.ArgumentParser:
                    help="noop: count actions outside the mask (as passes); raise: stop at the first, naming it")
     p.add_argument("--jobs", type=int, default=1, help=f"worker processes (this machine: {default_jobs()})")
     p.add_argument("--list", action="store_true", help="list the suite's task ids and exit")
+    p.add_argument("--cards", action="store_true", help="print the suite's task cards (markdown) and exit")
+    p.add_argument("--leaderboard", nargs="+", type=Path, metavar="DIR",
+                   help="print one markdown table of the normalised scores in these --out folders and exit")
     p.add_argument("--write-reference", action="store_true",
                    help="recompute configs/suites/v0/reference.json for --tasks (random, normaliser, best known)")
     return p
@@ -164,6 +186,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     task_ids = parse_tasks(args.tasks)
     if args.list:
         print("\n".join(task_ids))
+        return 0
+    if args.cards:
+        print(cards(), end="")
+        return 0
+    if args.leaderboard:
+        print(leaderboard(args.leaderboard), end="")
         return 0
     if args.episodes is not None and args.episodes < 1:
         raise ConfigError(f"--episodes: got {args.episodes}; allowed: an integer >= 1")

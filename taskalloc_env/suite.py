@@ -80,20 +80,20 @@ _TASKS = [
     SuiteTask("Default", "default", {}, episodes=30,
               tests="the headline setting: 10 agents, 20 tasks, every task needs L_j = 4 agents",
               source="thesis §3.3.2 test scenario at the setting of §5.3.2, Fig 5.16 (E5.10); article Fig 7"),
-    SuiteTask("Large", "default", {"n_agents": 50, "n_tasks": 100}, episodes=10,
+    SuiteTask("Large", "default", {"n_agents": 50, "n_tasks": 100}, episodes=5,
               tests="scale: 50 agents, 100 tasks, L_j = 4 (observation and action spaces five times Default's)",
               source="ours: Default's generator at five times the size (the sources stop at 16 agents)"),
-    SuiteTask("Hetero", "default", {"n_agents": 10, "n_tasks": 20, **HETERO}, episodes=30,
+    SuiteTask("Hetero", "default", {"n_agents": 10, "n_tasks": 20, **HETERO}, episodes=20,
               tests="equipment and prerequisites: types A, B, C; tasks needing A, AB or ABC (one agent per item); "
                     "5 prerequisite chains of 3 tasks",
               source="thesis §3.3.4: E3.14 Exp3 (Fig 3.23, heterogeneous agents) with E3.15 Exp2's chains "
                      "(Fig 3.25); the combination is ours"),
-    SuiteTask("TightWindows", "default", {"window": 1.0}, episodes=30,
+    SuiteTask("TightWindows", "default", {"window": 1.0}, episodes=20,
               tests="timing: each task must be started within 1 min of its start time instead of 5, so L_j = 4 "
                     "agents must arrive nearly together",
               source="thesis §3.3.2 test scenario with the window cut from 5 min to 1 min (ours)"),
     SuiteTask("Range", "default", {"agents_per_task": 2, "comm_range": 2.0, "require_known_capacity": True},
-              episodes=30,
+              episodes=20,
               tests="limited communication: range 2 km on the 5 × 5 km floor (often two groups), multi-hop "
                     "messages, agents bid only on tasks whose L_j = 2 capable agents they know",
               source="thesis §4.3, Figs 4.6–4.7 (E4.3; Figs 4.3–4.4 at r = 2 show two groups), CBGA's L_j = 2 "
@@ -115,7 +115,7 @@ _TASKS = [
                     "25 more released one every 50 ticks; episodes end at local convergence",
               source="Johnson §4.1.3 (8 agents, 35 tasks, bundles of 5, Figs 4-3–4-4); CBGABI does not apply "
                      "(single-agent tasks, asynchronous), ACBBA normalises"),
-    *[SuiteTask(f"Ladder{n}x{m}", "train_small", {"n_agents": n, "n_tasks": m}, episodes=30 if n <= 8 else 20,
+    *[SuiteTask(f"Ladder{n}x{m}", "train_small", {"n_agents": n, "n_tasks": m}, episodes=20 if n <= 8 else 10,
                 best_known="lns",
                 tests=f"size generalisation: Small's generator at {n} agents and {m} tasks (train on Small, test "
                       "here)",
@@ -132,6 +132,19 @@ def task(task_id: str) -> SuiteTask:
     close = difflib.get_close_matches(task_id, TASKS, n=1)
     hint = f" (did you mean {close[0]!r}?)" if close else ""
     raise ConfigError(f"unknown task {task_id!r}{hint}; suite {SUITE} has: {', '.join(TASKS)}")
+
+
+def cards() -> str:
+    """The suite's cards as markdown (docs/benchmark.md holds this text; ``taskalloc benchmark --cards``)."""
+    blocks = []
+    for t in TASKS.values():
+        changed = ", ".join(f"{k}={v}" for k, v in t.overrides.items()) or "none"
+        blocks.append(f"### `{t.id}`\n\n- **Tests:** {t.tests}.\n- **Source:** {t.source}.\n"
+                      f"- **Scenario:** `{t.scenario}`, overridden: {changed}.\n"
+                      f"- **Seeds:** test {t.test_seeds[0]}–{t.test_seeds[-1]}, validation "
+                      f"{t.validation_seeds[0]}–{t.validation_seeds[-1]} ({t.episodes} each).\n"
+                      f"- **Normalised by:** random = 0, {t.normaliser} = 1; best known: {t.best_known}.\n")
+    return "\n".join(blocks)
 
 
 def register_suite() -> None:

@@ -239,3 +239,10 @@ def test_whole_suite_with_an_import_path_policy_and_the_baselines(tmp_path, user
         ids = [i for i, t in suite.TASKS.items() if t.normaliser == normaliser]
         summary, _ = benchmark.run([normaliser], ids, episodes=3)
         assert all(t["normalised"] == pytest.approx(1.0, abs=1e-12) for t in summary["tasks"].values())
+
+
+def test_docs_hold_the_cards_and_the_leaderboard_command():
+    from pathlib import Path
+    text = (Path(__file__).resolve().parents[1] / "docs" / "benchmark.md").read_text(encoding="utf-8")
+    assert suite.cards() in text
+    assert "taskalloc benchmark --leaderboard" in text
