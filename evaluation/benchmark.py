@@ -114,6 +114,22 @@ def markdown(summary: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def reference_table(task_ids: Sequence[str]) -> str:
+    """The reference's mean scores per task: random, the normaliser, the best known, and the normalising gap."""
+    reference = load_reference(SUITE)["tasks"]
+    lines = ["| task | seeds | random | normaliser | best known | (normaliser − random) / best known |",
+             "|---|---:|---:|---:|---:|---:|"]
+    for task_id in task_ids:
+        if task_id not in reference:
+            continue
+        ref = means(reference[task_id], reference[task_id]["seeds"])
+        gap = (ref["normaliser_score"] - ref["random"]) / ref["best_known_score"]
+        lines.append(f"| {task_id} | {len(reference[task_id]['seeds'])} | {ref['random']:.1f} | "
+                     f"{ref['normaliser_score']:.1f} ({ref['normaliser']}) | {ref['best_known_score']:.1f} "
+                     f"({ref['best_known']}) | {gap:.3f} |")
+    return "\n".join(lines) + "\n"
+
+
 def leaderboard(folders: Sequence[Path]) -> str:
     """One row per benchmarked policy (its ``summary.json``), one column per task: normalised scores, then the IQM."""
     summaries = []
@@ -172,6 +188,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, default=1, help=f"worker processes (this machine: {default_jobs()})")
     p.add_argument("--list", action="store_true", help="list the suite's task ids and exit")
     p.add_argument("--cards", action="store_true", help="print the suite's task cards (markdown) and exit")
+    p.add_argument("--reference-table", action="store_true",
+                   help="print the committed reference's mean scores per task (markdown) and exit")
     p.add_argument("--leaderboard", nargs="+", type=Path, metavar="DIR",
                    help="print one markdown table of the normalised scores in these --out folders and exit")
     p.add_argument("--write-reference", action="store_true",
@@ -189,6 +207,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     if args.cards:
         print(cards(), end="")
+        return 0
+    if args.reference_table:
+        print(reference_table(task_ids), end="")
         return 0
     if args.leaderboard:
         print(leaderboard(args.leaderboard), end="")
