@@ -10,7 +10,9 @@ whose spread the intervals then include. Scores are normalised against the commi
 
 Bad input, checked before any episode: an unknown task id lists the suite's ids; a policy that does not resolve is
 one line and exit 2; an existing ``--out`` needs ``--overwrite``. An action outside the mask is counted per task
-(``--invalid-action noop``, the default) or stops the run naming the agent and action (``raise``, exit 1).
+(``--invalid-action noop``, the default) or stops the run naming the agent and action (``raise``, exit 1). A task
+whose environment the policy refuses (``ValueError`` from ``start``: a checkpoint trained on other features) is
+marked ``not_applicable`` with the reason, left out of the aggregate, and named on stderr.
 """
 
 from __future__ import annotations
@@ -77,12 +79,19 @@ def run(policies: Sequence[str], task_ids: Sequence[str], episodes: int | None =
         seeds = task_seeds(task_id, episodes)
         ref = means(reference[task_id], seeds)
         runs = []
-        for k, policy in enumerate(policies):
-            task_rows = play_task(policy, task_id, seeds, invalid_action, jobs)
+        try:
+            for policy in policies:
+                runs.append(play_task(policy, task_id, seeds, invalid_action, jobs))
+        except InvalidActionError:
+            raise
+        except ValueError as exc:           # the policy refuses the task's env (a checkpoint of other features)
+            tasks[task_id] = {"seeds": seeds, "episodes": 0, "not_applicable": str(exc).splitlines()[0]}
+            print(f"benchmark: {task_id} skipped: {tasks[task_id]['not_applicable']}", file=sys.stderr)
+            continue
+        for k, task_rows in enumerate(runs):
             norm = bstats.normalise([r["score"] for r in task_rows], ref["random"], ref["normaliser_score"])
             for row, value in zip(task_rows, norm):
                 rows.append({"run": k, **row, "normalised": float(value)})
-            runs.append(task_rows)
         scores[task_id] = np.array([[r["score"] for r in run_rows] for run_rows in runs])
         normalised[task_id] = bstats.normalise(scores[task_id], ref["random"], ref["normaliser_score"])
         tasks[task_id] = {"seeds": seeds, "episodes": len(seeds) * len(policies), "runs": len(policies),
@@ -91,6 +100,8 @@ def run(policies: Sequence[str], task_ids: Sequence[str], episodes: int | None =
                           "normaliser": ref["normaliser"], "best_known": ref["best_known"],
                           "random_score": ref["random"], "normaliser_score": ref["normaliser_score"],
                           "best_known_score": ref["best_known_score"]}
+    if not normalised:
+        raise ConfigError(f"{label} applies to none of the tasks {list(task_ids)}")
     summary = {"suite": SUITE, "policy": label, "runs": list(policies), "invalid_action": invalid_action,
                "tasks": tasks, "aggregate": bstats.aggregate(bstats.aggregate_matrix(normalised))}
     summary["marl_eval"] = bstats.marl_eval_json(label, scores, normalised)
@@ -103,6 +114,9 @@ def markdown(summary: dict[str, Any]) -> str:
     lines = [f"Suite {summary['suite']}, policy {summary['policy']}", "", "| " + " | ".join(head) + " |",
              "|" + "---|" * len(head)]
     for task_id, t in summary["tasks"].items():
+        if "not_applicable" in t:
+            lines.append(f"| {task_id} | 0 | not applicable: {t['not_applicable'][:100]} |" + " |" * 5)
+            continue
         share = "–" if t["best_known_share"] is None else f"{t['best_known_share']:.3f} ({t['best_known']})"
         lines.append(f"| {task_id} | {t['episodes']} | {t['score']:.1f} | {t['normalised']:.3f} | "
                      f"[{t['ci95'][0]:.3f}, {t['ci95'][1]:.3f}] | {share} | {t['normaliser']} | "
@@ -143,7 +157,8 @@ def leaderboard(folders: Sequence[Path]) -> str:
     lines = ["| policy | IQM [95 % CI] | " + " | ".join(names) + " |", "|---|---|" + "---:|" * len(names)]
     for s in sorted(summaries, key=lambda s: -s["aggregate"]["iqm"]):
         agg = s["aggregate"]
-        cells = [f"{s['tasks'][t]['normalised']:.2f}" if t in s["tasks"] else "–" for t in task_ids]
+        cells = [f"{s['tasks'][t]['normalised']:.2f}" if "normalised" in s["tasks"].get(t, {}) else "–"
+                 for t in task_ids]
         lines.append(f"| {s['policy']} | {agg['iqm']:.2f} [{agg['iqm_ci95'][0]:.2f}, {agg['iqm_ci95'][1]:.2f}] | "
                      + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

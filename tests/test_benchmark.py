@@ -43,6 +43,12 @@ USER_MODULE = textwrap.dedent('''
         return {agent: len(obs["action_mask"]) + 3 for agent, obs in observations.items()}
 
 
+    class FourAgentsOnly(FirstBid):
+        def start(self, env, seed=None):
+            if env.unwrapped.config.n_agents != 4:
+                raise ValueError("trained on 4 agents")
+
+
     NOT_A_POLICY = 42
 ''')
 
@@ -207,6 +213,15 @@ def test_bad_policy_is_one_line_and_exit_2(tmp_path, user_module, capsys, path):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and err.startswith("error:")
     assert not (tmp_path / "o").exists()
+
+
+def test_a_task_the_policy_refuses_is_reported_not_applicable(user_module):
+    summary, rows = benchmark.run([f"{user_module}:FourAgentsOnly"], ["taskalloc/Small-v0", "taskalloc/Ladder6x12-v0"],
+                                  episodes=2)
+    assert summary["tasks"]["taskalloc/Ladder6x12-v0"] == {"seeds": [50000, 50001], "episodes": 0,
+                                                           "not_applicable": "trained on 4 agents"}
+    assert summary["aggregate"]["tasks"] == 1 and {r["task"] for r in rows} == {"taskalloc/Small-v0"}
+    assert "not applicable: trained on 4 agents" in benchmark.markdown(summary)
 
 
 def test_missing_rliable_names_the_extra(monkeypatch):
