@@ -99,6 +99,7 @@ def run(policies: Sequence[str], task_ids: Sequence[str], episodes: int | None =
                           "invalid_actions": int(sum(r["invalid_actions"] for run_rows in runs for r in run_rows)),
                           "normaliser": ref["normaliser"], "best_known": ref["best_known"],
                           "random_score": ref["random"], "normaliser_score": ref["normaliser_score"],
+                          "normaliser_gap": ref["normaliser_score"] - ref["random"],
                           "best_known_score": ref["best_known_score"]}
     if not normalised:
         raise ConfigError(f"{label} applies to none of the tasks {list(task_ids)}")
