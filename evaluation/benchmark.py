@@ -89,11 +89,11 @@ def run(policies: Sequence[str], task_ids: Sequence[str], episodes: int | None =
             print(f"benchmark: {task_id} skipped: {tasks[task_id]['not_applicable']}", file=sys.stderr)
             continue
         for k, task_rows in enumerate(runs):
-            norm = bstats.normalise([r["score"] for r in task_rows], ref["random"], ref["normaliser_score"])
+            norm = bstats.normalise([r["score"] for r in task_rows], ref)
             for row, value in zip(task_rows, norm):
                 rows.append({"run": k, **row, "normalised": float(value)})
         scores[task_id] = np.array([[r["score"] for r in run_rows] for run_rows in runs])
-        normalised[task_id] = bstats.normalise(scores[task_id], ref["random"], ref["normaliser_score"])
+        normalised[task_id] = bstats.normalise(scores[task_id], ref)
         tasks[task_id] = {"seeds": seeds, "episodes": len(seeds) * len(policies), "runs": len(policies),
                           **bstats.task_figures(scores[task_id], ref),
                           "invalid_actions": int(sum(r["invalid_actions"] for run_rows in runs for r in run_rows)),

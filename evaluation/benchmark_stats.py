@@ -2,12 +2,13 @@
 
 Normalised score of a task (ours, the usual min-max normalisation of Agarwal et al. 2021): ``(score − random) /
 (normaliser − random)`` with the task's mean scores on the same seeds, so the normalising baseline (CBGABI, or the
-baseline the task's card names) is 1 and the uniform random masked policy 0. Because the map is affine with fixed
-task constants, the per-instance values ``(s_i − random) / (normaliser − random)`` average to the task's figure and
-their 95 % t-interval is the interval over instances; with several runs (training seeds) of a learned policy the
-interval is over the runs' means. The aggregate over tasks is rliable's interquartile mean with its stratified
-bootstrap (Agarwal et al. 2021, ``rliable.library.get_interval_estimates``): one row per run (several runs) or per
-instance (one run; the k-th test seed of every task is a row, tasks being independent).
+baseline the task's card names) is 1 and the uniform random masked policy 0. Per instance the value is paired with
+random on the same seed, ``(s_i − random_i) / (normaliser − random)`` (the paired design of thesis §5.3.1: the
+instance's difficulty cancels); these average to the task's figure, and their 95 % t-interval is the interval over
+instances. With several runs (training seeds) of a learned policy the interval is over the runs' means.
+The aggregate over tasks is rliable's interquartile mean with its stratified bootstrap (Agarwal et al. 2021,
+``rliable.library.get_interval_estimates``): one row per run (several runs) or per instance (one run; the k-th test
+seed of every task is a row, tasks being independent).
 """
 
 from __future__ import annotations
@@ -25,11 +26,14 @@ BOOTSTRAP_REPS = 2000
 BOOTSTRAP_SEED = 0
 
 
-def normalise(scores: Sequence[float] | np.ndarray, random: float, normaliser: float) -> np.ndarray:
-    """``(scores − random) / (normaliser − random)``; nan when the two baselines tie (no scale to measure with)."""
-    gap = normaliser - random
+def normalise(scores: Sequence[float] | np.ndarray, reference: Mapping[str, Any]) -> np.ndarray:
+    """``(s_i − random_i) / (normaliser − random)`` per seed (the last axis of ``scores``, in ``reference``'s seed
+    order); nan when the two baselines' means tie (no scale to measure with)."""
+    gap = reference["normaliser_score"] - reference["random"]
     values = np.asarray(scores, dtype=float)
-    return (values - random) / gap if gap != 0 else np.full(values.shape, np.nan)
+    if gap == 0:
+        return np.full(values.shape, np.nan)
+    return (values - np.asarray(reference["random_per_seed"], dtype=float)) / gap
 
 
 def interval(values: np.ndarray) -> list[float]:
@@ -43,10 +47,10 @@ def task_figures(runs: Sequence[Sequence[float]], reference: Mapping[str, Any]) 
     """One task's figures from ``runs`` (per run, the raw score per test seed, in ``reference``'s seed order).
 
     ``reference`` holds the seeds' mean scores of ``random``, of the normalising baseline and of the best-known
-    solver (the first ``len(runs[0])`` seeds of ``taskalloc.evaluation.suite_reference``).
+    solver, and random's score per seed (the first ``len(runs[0])`` seeds of ``taskalloc.evaluation.suite_reference``).
     """
     scores = np.asarray(runs, dtype=float)                      # runs × instances
-    normalised = normalise(scores, reference["random"], reference["normaliser_score"])
+    normalised = normalise(scores, reference)
     per_run = normalised.mean(axis=1)
     best = reference["best_known_score"]
     return {

@@ -99,6 +99,7 @@ def means(entry: dict[str, Any], seeds: Sequence[int]) -> dict[str, Any]:
         raise ConfigError(f"seeds {missing[:5]} are not in the reference's test seeds")
     rows = [index[s] for s in seeds]
     return {"random": float(np.mean([entry["random"][k] for k in rows])),
+            "random_per_seed": [entry["random"][k] for k in rows],
             "normaliser_score": float(np.mean([entry["normaliser"][k] for k in rows])),
             "best_known_score": float(np.mean([entry["best_known"][k] for k in rows])),
             "normaliser": entry["solvers"]["normaliser"], "best_known": entry["solvers"]["best_known"]}

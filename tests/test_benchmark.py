@@ -149,6 +149,8 @@ def test_cbgabi_is_one_and_random_zero(tmp_path):
         summary, _ = benchmark.run([policy], tasks, episodes=4)
         for task_id in tasks:
             assert summary["tasks"][task_id]["normalised"] == pytest.approx(expected, abs=1e-12)
+            if policy == "random":          # paired with itself on every seed: no spread at all
+                assert summary["tasks"][task_id]["ci95"] == [0.0, 0.0]
 
 
 @pytest.mark.parametrize("policy", ["random", "cbgabi"])
@@ -236,10 +238,12 @@ def test_missing_rliable_names_the_extra(monkeypatch):
 
 
 def test_intervals_over_runs_and_the_aggregate_rows():
-    reference = {"random": 0.0, "normaliser_score": 10.0, "best_known_score": 20.0}
+    reference = {"random": 0.0, "random_per_seed": [0.0, 0.0, 0.0], "normaliser_score": 10.0,
+                 "best_known_score": 20.0}
     one = benchmark_stats.task_figures([[5.0, 15.0, 10.0]], reference)
     assert one["normalised"] == pytest.approx(1.0) and one["best_known_share"] == pytest.approx(0.5)
     assert one["ci95"][0] < 1.0 < one["ci95"][1] and one["ci95_runs"] is None
+    reference = {**reference, "random_per_seed": [0.0, 0.0]}
     runs = benchmark_stats.task_figures([[10.0, 10.0], [20.0, 20.0]], reference)
     assert runs["per_run_normalised"] == [1.0, 2.0] and runs["ci95"] == runs["ci95_runs"]
     matrix = benchmark_stats.aggregate_matrix({"a": np.ones((1, 5)), "b": np.zeros((1, 3))})
