@@ -270,3 +270,12 @@ def test_docs_hold_the_cards_and_the_leaderboard_command():
     text = (Path(__file__).resolve().parents[1] / "docs" / "benchmark.md").read_text(encoding="utf-8")
     assert suite.cards() in text
     assert "taskalloc benchmark --leaderboard" in text
+
+
+def test_aggregate_is_the_interquartile_mean_with_bootstrap_intervals():
+    from scipy import stats
+    matrix = np.array([[0.0, 1.0], [1.0, 1.0], [2.0, 1.0], [100.0, 1.0]])
+    result = benchmark_stats.aggregate(matrix, reps=200)
+    assert result["iqm"] == pytest.approx(stats.trim_mean(matrix.ravel(), 0.25))
+    assert result["mean"] == pytest.approx(matrix.mean())
+    assert result["iqm_ci95"][0] <= result["iqm"] <= result["iqm_ci95"][1] < result["mean_ci95"][1]
