@@ -155,14 +155,20 @@ def leaderboard(folders: Sequence[Path]) -> str:
         summaries.append(json.loads(path.read_text(encoding="utf-8")))
     task_ids = list(dict.fromkeys(t for s in summaries for t in s["tasks"]))
     names = [t.split("/", 1)[-1].removesuffix(f"-{SUITE}") for t in task_ids]
-    lines = ["| policy | IQM [95 % CI] | " + " | ".join(names) + " |", "|---|---|" + "---:|" * len(names)]
-    for s in sorted(summaries, key=lambda s: -s["aggregate"]["iqm"]):
-        agg = s["aggregate"]
-        cells = [f"{s['tasks'][t]['normalised']:.2f}" if "normalised" in s["tasks"].get(t, {}) else "–"
-                 for t in task_ids]
-        lines.append(f"| {s['policy']} | {agg['iqm']:.2f} [{agg['iqm_ci95'][0]:.2f}, {agg['iqm_ci95'][1]:.2f}] | "
-                     + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+    ranked = sorted(summaries, key=lambda s: -s["aggregate"]["iqm"])
+    tables = []
+    for figure, first in (("normalised", "IQM [95 % CI]"), ("best_known_share", "mean (tasks run)")):
+        lines = [f"| policy | {first} | " + " | ".join(names) + " |", "|---|---|" + "---:|" * len(names)]
+        for s in ranked:
+            values = [s["tasks"].get(t, {}).get(figure) for t in task_ids]
+            agg = s["aggregate"]
+            lead = (f"{agg['iqm']:.2f} [{agg['iqm_ci95'][0]:.2f}, {agg['iqm_ci95'][1]:.2f}]" if figure == "normalised"
+                    else f"{np.mean([v for v in values if v is not None]):.3f}")
+            cells = ["–" if v is None else f"{v:.{2 if figure == 'normalised' else 3}f}" for v in values]
+            lines.append(f"| {s['policy']} | {lead} | " + " | ".join(cells) + " |")
+        tables.append("\n".join(lines))
+    return ("Normalised score (random 0, normaliser 1):\n\n" + tables[0]
+            + "\n\nShare of the best known (exact optimum on Small, LNS elsewhere):\n\n" + tables[1] + "\n")
 
 
 def write(out: Path, summary: dict[str, Any], rows: Sequence[dict[str, Any]]) -> None:
