@@ -153,9 +153,10 @@ def test_cbgabi_is_one_and_random_zero(tmp_path):
                 assert summary["tasks"][task_id]["ci95"] == [0.0, 0.0]
 
 
-@pytest.mark.parametrize("policy", ["random", "cbgabi"])
-def test_summary_scores_equal_plain_pettingzoo_episodes(policy):
-    task_id = "taskalloc/Small-v0"
+@pytest.mark.parametrize("task_id,policy", [
+    ("taskalloc/Small-v0", "random"), ("taskalloc/Small-v0", "cbgabi"), ("taskalloc/Lossy-v0", "cbgabi"),
+    ("taskalloc/Range-v0", "random"), pytest.param("taskalloc/Async-v0", "acbba", marks=pytest.mark.slow)])
+def test_summary_scores_equal_plain_pettingzoo_episodes(task_id, policy):
     summary, rows = benchmark.run([policy], [task_id], episodes=3)
     entry = summary["tasks"][task_id]
     plain = []
