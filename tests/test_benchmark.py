@@ -280,3 +280,19 @@ def test_aggregate_is_the_interquartile_mean_with_bootstrap_intervals():
     assert result["iqm"] == pytest.approx(stats.trim_mean(matrix.ravel(), 0.25))
     assert result["mean"] == pytest.approx(matrix.mean())
     assert result["iqm_ci95"][0] <= result["iqm"] <= result["iqm_ci95"][1] < result["mean_ci95"][1]
+
+
+def test_several_runs_give_intervals_over_runs():
+    summary, rows = benchmark.run(["cbgabi", "random"], ["taskalloc/Small-v0"], episodes=3, label="two runs")
+    t = summary["tasks"]["taskalloc/Small-v0"]
+    assert summary["policy"] == "two runs" and t["runs"] == 2 and t["episodes"] == 6
+    assert t["per_run_normalised"] == pytest.approx([1.0, 0.0]) and t["normalised"] == pytest.approx(0.5)
+    assert t["ci95"] == t["ci95_runs"] and t["ci95"][0] < 0.0 and t["ci95"][1] > 1.0     # t(1) is wide
+    assert summary["aggregate"]["rows"] == 2 and {r["run"] for r in rows} == {0, 1}
+
+
+def test_unknown_suite_and_bad_episodes_are_usage_errors(capsys):
+    assert cli(["benchmark", "--suite", "v1", "--policy", "random", "--out", "x"]) == 2
+    assert "unknown suite" in capsys.readouterr().err
+    assert cli(["benchmark", "--policy", "random", "--out", "x", "--episodes", "0"]) == 2
+    assert "--episodes" in capsys.readouterr().err
