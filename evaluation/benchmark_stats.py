@@ -76,11 +76,18 @@ def aggregate(matrix: np.ndarray, reps: int = BOOTSTRAP_REPS) -> dict[str, Any]:
     out: dict[str, Any] = {"method": "rliable stratified bootstrap", "reps": reps, "rows": int(matrix.shape[0]),
                            "tasks": int(matrix.shape[1])}
     for name, function in functions.items():
-        with warnings.catch_warnings():         # arch, under rliable, deprecates the RandomState rliable passes
-            warnings.simplefilter("ignore", FutureWarning)
-            point, bounds = rly.get_interval_estimates(
-                {"policy": matrix}, lambda x, f=function: np.array([f(x)]), reps=reps,
-                random_state=np.random.RandomState(BOOTSTRAP_SEED))
+        # rliable's bootstrap draws from numpy's global generator as well as the RandomState it is given (arch, under
+        # it, deprecates that argument): seed both for reproducible intervals, then give the global state back
+        saved = np.random.get_state()  # noqa: NPY002
+        np.random.seed(BOOTSTRAP_SEED)  # noqa: NPY002
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", FutureWarning)
+                point, bounds = rly.get_interval_estimates(
+                    {"policy": matrix}, lambda x, f=function: np.array([f(x)]), reps=reps,
+                    random_state=np.random.RandomState(BOOTSTRAP_SEED))
+        finally:
+            np.random.set_state(saved)  # noqa: NPY002
         out[name] = float(point["policy"][0])
         out[f"{name}_ci95"] = [float(bounds["policy"][0][0]), float(bounds["policy"][1][0])]
     return out
