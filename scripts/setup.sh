@@ -30,7 +30,7 @@ if ! .venv/bin/python -c "import torch" 2>/dev/null; then
     .venv/bin/python -m pip install --quiet "torch==$TORCH_VERSION"
   fi
 fi
-.venv/bin/python -m pip install --quiet -e ".[train,dev,integrations]"
+.venv/bin/python -m pip install --quiet -e ".[train,dev,integrations,benchmark]"
 cuda=$(.venv/bin/python -m pip list --format=freeze 2>/dev/null | grep -i '^nvidia-' || true)
 if [ -n "$cuda" ]; then
   echo "setup: CUDA packages were installed (a CUDA build of torch?):" >&2

@@ -15,6 +15,7 @@ from collections.abc import Sequence
 COMMANDS: dict[str, tuple[str, str]] = {
     "compare": ("taskalloc.evaluation.compare", "every baseline (and committed learned policies) on paired seeds"),
     "experiments": ("taskalloc.evaluation.experiments", "run, report and list the sources' experiments (YAML)"),
+    "benchmark": ("taskalloc.evaluation.benchmark", "any policy on the task suite v0: normalised scores, one protocol"),
     "fuzz": ("taskalloc.evaluation.fuzz", "random scenarios over every option and policy against the invariants"),
     "robustness": ("taskalloc.evaluation.robustness", "each algorithm under message loss, episode by episode"),
     "dropout": ("taskalloc.evaluation.dropout", "one agent fails mid-auction against a team it was never in"),
