@@ -93,8 +93,9 @@ def test_training_runs_in_the_asynchronous_mode_with_popup_tasks(tmp_path):
     assert summary["ppo"]["steps"] >= 1024 and summary["validation"]["score"] > 0
     assert summary["cpu_seconds"] > 0 and summary["load_average_at_start"] >= 0 and "load_average_at_end" in summary
     policy = LearnedPolicy.load(tmp_path / "model.json")
-    assert policy.env_overrides["consensus"] == "acbba" and policy.env_overrides["popup_tasks"] == 2
-    env = TaskAllocEnv("train_small", **policy.env_overrides)
+    assert policy.env_overrides["consensus"] == "acbba"
+    assert "popup_tasks" not in policy.env_overrides        # the instance is the run's, not the policy's
+    env = TaskAllocEnv("train_small", popup_tasks=2, popup_period=10, **policy.env_overrides)
     assert "released" in env.observation_layout.task_names
     allocation = rollout(env, policy, seed=VALIDATION_SEED_START)
     assert allocation.counters.broadcasts > 0 and allocation.counters.rounds > 0

@@ -26,7 +26,6 @@ from taskalloc.policies import checkpoint
 from taskalloc.policies.learned import LearnedPolicy, resolve
 from taskalloc.policies.networks import MlpActor, PoolingActor, PoolingEncoder, mlp, split_tasks
 from taskalloc_env.actions import n_actions as action_count
-from taskalloc_env.config import PROTOCOL_FIELDS
 from taskalloc_env.observation import TASK_FEATURES, ObservationLayout
 
 BODIES = ("pooling", "mlp")
@@ -124,8 +123,9 @@ def actor_of(policy: ActorCriticPolicy) -> nn.Module:
 
 
 def protocol_overrides(env_kwargs: Mapping[str, Any]) -> dict[str, Any]:
-    """The protocol options among an env's keyword arguments (what a learned policy needs from its env)."""
-    return {k: v for k, v in env_kwargs.items() if k in PROTOCOL_FIELDS}
+    """The options a policy plays by among an env's keyword arguments (``checkpoint.POLICY_OPTIONS``: what a learned
+    policy needs from its env; the network, the round bound and the instance are the run's)."""
+    return {k: v for k, v in env_kwargs.items() if k in checkpoint.POLICY_OPTIONS}
 
 
 def as_learned(policy: ActorCriticPolicy, layout: ObservationLayout, env_kwargs: Mapping[str, Any],
