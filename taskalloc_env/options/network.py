@@ -10,7 +10,7 @@ NETWORK_GROUP = group("network", (
     Field('comm_range', 'number', low=0, optional=True, default=None,
           meaning=('communication range r (km); agents link by their start positions and bids travel multi-hop '
                    '(messages are forwarded whole); null = every agent hears every other'),
-          source='thesis §4.3 (Figs 4.2–4.7); digest E4.2–E4.3'),
+          source='thesis §4.3 (Figs 4.2–4.7)'),
     Field('edge_rule', 'choice', choices=('dist', 'circles_overlap'), default='dist',
           meaning=('`dist` (link when distance ≤ r: circles of radius r/2 overlap) \\| `circles_overlap` (≤ 2r: '
                    'circles of radius r overlap)'),
