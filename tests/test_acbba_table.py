@@ -190,6 +190,7 @@ def test_one_vectorised_call_decides_every_cell_like_single_calls():
 WINNERS = {"i": I, "k": K, "m": M, "n": N, "none": E}
 
 
+@pytest.mark.slow
 def test_every_combination_maps_to_exactly_one_action_and_never_adopts_the_receiver_as_winner():
     """All (z_k, z_i) pairs × bid and time orders × options: one action each, from the table's set; the receiver's
     new winner is never itself unless it already was (no row copies z_kj = i, note property 21), and a task the

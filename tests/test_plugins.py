@@ -152,6 +152,7 @@ def _compare(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
                            "--jobs", "1", *args], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_compare_adds_a_row_per_policy_given_by_import_path(tmp_path, user_module):
     done = _compare(tmp_path, "--policy", f"{user_module}:LastBid", "--policy", f"{user_module}:Named")
     assert done.returncode == 0, done.stderr
@@ -160,6 +161,7 @@ def test_compare_adds_a_row_per_policy_given_by_import_path(tmp_path, user_modul
     assert rows["my pass"].split("|")[2].strip() == "0 ± 0"            # the passing policy's score
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", ["no_such_module_xyz:Policy", "{m}:NUMBER", "cbgx"])
 def test_compare_exits_2_with_one_line_on_a_bad_policy(tmp_path, user_module, path):
     done = _compare(tmp_path, "--policy", path.format(m=user_module))

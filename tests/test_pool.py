@@ -32,6 +32,7 @@ def torch_threads(_: int) -> int:
     return torch.get_num_threads()
 
 
+@pytest.mark.slow
 def test_results_come_back_as_they_finish_and_in_order_from_parallel_map():
     items = list(range(12))
     finished = list(as_finished(slow_first, items, jobs=2))
