@@ -33,7 +33,7 @@ from importlib.resources.abc import Traversable
 from pathlib import Path
 from typing import Any
 
-from taskalloc_env.config import PROTOCOL_FIELDS
+from taskalloc_env.config import FACTS, PROTOCOL_FIELDS
 from taskalloc_env.errors import ConfigError, run_cli
 from taskalloc_env.resources import check_file, read_bounded
 
@@ -42,12 +42,11 @@ MAX_JSON_BYTES = 1 << 20
 MAX_SIZE = 1 << 16              # largest integer size a network may be built with
 MAX_PARAMETERS = 50_000_000     # largest actor a checkpoint may describe (refused before anything is allocated)
 # what a checkpoint's env_overrides may set: the protocol options a policy plays by (ours). Never the network (range,
-# loss, delays, failures, timing), the round bound or the instance (pop-up tasks): those are the run's, not the policy's
-NOT_POLICY_OPTIONS = ("comm_range", "edge_rule", "max_rounds", "message_loss", "loss_model", "burst_enter",
-                      "burst_leave", "burst_loss", "max_delay", "dropouts", "dropout_rounds", "dropout_schedule",
-                      "silence_timeout", "popup_tasks", "popup_period", "popup_arrivals", "popup_times",
-                      "mission_time_per_tick", "message_ticks", "build_ticks", "separation_time")
-POLICY_OPTIONS = tuple(name for name in PROTOCOL_FIELDS if name not in NOT_POLICY_OPTIONS)
+# loss, delays, failures), the instance (pop-up tasks), the round bound or the asynchronous clock: those are the run's
+RUN_GROUPS = ("network", "popups")
+RUN_FIELDS = ("max_rounds", "message_ticks", "build_ticks", "separation_time")
+POLICY_OPTIONS = tuple(name for name in PROTOCOL_FIELDS
+                       if FACTS[name].group not in RUN_GROUPS and name not in RUN_FIELDS)
 MAX_WEIGHT_BYTES = 8 * MAX_PARAMETERS + MAX_JSON_BYTES      # a safetensors file of that many float64 weights
 MAX_ZIP_MEMBERS = 64            # an SB3 zip holds a handful of entries (data, policy.pth, optimizer, versions)
 
