@@ -16,6 +16,7 @@ from taskalloc_env.errors import ConfigError, InvalidActionError
 from taskalloc_env.observation import ObservationLayout
 from taskalloc_env.scenario import Agent, Scenario, Task, generate
 from taskalloc_env.suite import register_suite
+from taskalloc_env.vector import TaskAllocVectorEnv, vector_env
 
 ENV_ID = "taskalloc/TaskAlloc-v0"
 
@@ -35,7 +36,9 @@ __all__ = [
     "Task",
     "TaskAllocConfig",
     "TaskAllocEnv",
+    "TaskAllocVectorEnv",
     "generate",
     "load_config",
     "resolve_config",
+    "vector_env",
 ]

@@ -216,11 +216,7 @@ class TaskAllocEnv(ParallelEnv):
         decisions = self._read_actions(actions, flags)
         protocol.counters.invalid_actions += len(flags)
         self.invalid_action_reasons = flags
-        self._engine.apply(decisions)
-        score = protocol.score().score
-        reward = (score - self._last_score) / self.reward_scale
-        self._last_score = score
-        terminated, truncated = self._engine.ended(self.max_cycles)
+        reward, terminated, truncated = self._advance(decisions)
         agents = list(self.agents)
         observations = self._observations()
         alive, index = protocol.alive.tolist(), self.agent_index
@@ -241,6 +237,16 @@ class TaskAllocEnv(ParallelEnv):
         if self.render_mode == "human" and (self.render_path is None or not self.agents):
             self.render()
         return observations, rewards, terminations, truncations, infos
+
+    def _advance(self, decisions: list[tuple[int, int]]) -> tuple[float, bool, bool]:
+        """Apply a joint action of (agent, valid action) pairs in agent order: (the team reward, terminated,
+        truncated). The one step of this env and of each instance of the batched env (``vector``)."""
+        self._engine.apply(decisions)
+        score = self.protocol.score().score
+        reward = (score - self._last_score) / self.reward_scale
+        self._last_score = score
+        terminated, truncated = self._engine.ended(self.max_cycles)
+        return reward, terminated, truncated
 
     def _read_actions(self, actions: Mapping[str, Any], flags: dict[str, str]) -> list[tuple[int, int]]:
         """Validate the action dict against the live agents and their masks; apply ``invalid_action``."""
@@ -318,21 +324,33 @@ class TaskAllocEnv(ParallelEnv):
         return describe(action, self.config.n_tasks)
 
     # -- outputs ---------------------------------------------------------------------------------------------------
-    def _observations(self) -> dict[str, dict[str, np.ndarray]]:
+    def _rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """(N, D) observations and (N, A) action masks of every agent now (new arrays); the masks are kept for the
+        action checks of the next step."""
         obs = self._builder.observe(self.protocol, self._engine.passed, self.dtype)
         self._masks = self._engine.masks()
+        return obs, self._masks
+
+    def _observations(self) -> dict[str, dict[str, np.ndarray]]:
+        obs, _ = self._rows()
         self._allowed = self._masks.tolist()
         handed = self._masks.copy()             # the caller's masks: editing one leaves the env's checks alone
         index = self.agent_index
         return {a: {"observation": obs[index[a]], "action_mask": handed[index[a]]} for a in self.agents}
 
-    def _infos(self, flags: dict[str, str]) -> dict[str, dict[str, Any]]:
+    def _figures(self) -> dict[str, Any]:
+        """The episode's figures now, the same in every agent's info: score, valid tasks, conflicts, round,
+        messages, data items, converged."""
         p = self.protocol
         ts = p.score()
-        figures = {"score": ts.score, "valid_tasks": int(np.count_nonzero(ts.valid)),
-                   "conflicts": int(np.count_nonzero(ts.conflicts)),
-                   "round": p.round, "messages": p.counters.messages, "data_items": p.counters.data_items,
-                   "converged": p.converged}
+        return {"score": ts.score, "valid_tasks": int(np.count_nonzero(ts.valid)),
+                "conflicts": int(np.count_nonzero(ts.conflicts)),
+                "round": p.round, "messages": p.counters.messages, "data_items": p.counters.data_items,
+                "converged": p.converged}
+
+    def _infos(self, flags: dict[str, str]) -> dict[str, dict[str, Any]]:
+        p = self.protocol
+        figures = self._figures()
         asynchronous = self.config.asynchronous
         if asynchronous:                                 # Johnson §4.1.3: each agent declares its own convergence
             declared, declared_at = p.agents_locally_converged, p.local_ticks

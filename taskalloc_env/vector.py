@@ -1,0 +1,288 @@
+"""The batched environment: K independent instances, arrays in and out (``vector_env``).
+
+``vector_env(num_envs, **env_kwargs)`` takes the keywords of ``parallel_env`` and returns a
+``TaskAllocVectorEnv`` of K = ``num_envs`` instances of N agents each::
+
+    venv = taskalloc_env.vector_env(1024, scenario="default")
+    obs, infos = venv.reset(seed=0)            # instance k draws what parallel_env draws at reset(seed=0 + k)
+    obs["observation"]                         # (K, N, D) float32
+    obs["action_mask"]                         # (K, N, A) int8
+    obs, rewards, terminations, truncations, infos = venv.step(actions)    # actions: (K, N) integers
+    rewards                                    # (K, N): the team reward, the same for every agent of an instance
+    terminations, truncations                  # (K,): every agent of an instance ends together
+    infos["score"], infos["invalid_actions"]   # arrays of length K (``INFO_KEYS``); infos["passed"] is (K, N)
+    venv.state()                               # (K, S) for centralised critics
+
+Instance k is exactly a ``parallel_env`` seeded ``seed + k``: observations, masks, rewards, terminations, infos and
+the final allocation, step by step (``tests/test_vector.py``). Every instance runs the single env's step
+(``TaskAllocEnv._advance``: the step engine, ``engine.StepEngine``, one codec and one place that applies a joint
+action); the batch adds the array interface, the checks of a whole action array at once and the autoreset.
+
+Autoreset (``autoreset_mode``):
+
+* ``"next_step"`` (Gymnasium's default for vector envs): on the step after an instance's episode ended, its actions
+  are ignored and it starts its next episode (its generator continues, so a seeded run replays), returning the
+  first observation with zero reward and both flags false;
+* ``"same_step"`` (stable-baselines3's convention): an instance that ends is reset within the same step; its last
+  observation, state and figures are in ``infos["final_obs"]``, ``infos["final_state"]`` and
+  ``infos["final_info"]``, valid where ``infos["_final"]`` is set.
+
+Supported: every option of the single env except agent drop-outs (``dropouts``, ``dropout_schedule``: a failed
+agent leaves ``env.agents``, which a fixed (K, N) layout cannot express) and rendering. Today each instance is
+stepped in turn by the single env's engine; ``docs/benchmarks.md`` gives the throughput this reaches.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+
+from taskalloc_env.actions import PASS, describe
+from taskalloc_env.config import TaskAllocConfig
+from taskalloc_env.env import TaskAllocEnv
+from taskalloc_env.errors import ConfigError, InvalidActionError
+from taskalloc_env.memory import available_memory, memory_estimate
+from taskalloc_env.observation import state_vector
+from taskalloc_env.scenario import Scenario
+
+AUTORESET_MODES = ("next_step", "same_step")
+# the figures of every instance after each step, arrays of length K (``TaskAllocEnv._figures`` per instance)
+INFO_KEYS = {"score": np.float64, "valid_tasks": np.int64, "conflicts": np.int64, "round": np.int64,
+             "messages": np.int64, "data_items": np.int64, "converged": np.bool_}
+UNSUPPORTED = {"dropouts": 0, "dropout_schedule": None}      # field -> the only value the batch takes
+MAX_NUM_ENVS = 1_000_000
+
+
+def vector_env(num_envs: int, **env_kwargs: Any) -> TaskAllocVectorEnv:
+    """A batched environment of ``num_envs`` independent instances; ``env_kwargs`` are ``parallel_env``'s."""
+    return TaskAllocVectorEnv(num_envs, **env_kwargs)
+
+
+class TaskAllocVectorEnv:
+    """K instances of the parallel environment behind one array interface; see the module docstring."""
+
+    metadata: ClassVar[dict[str, Any]] = {"name": "taskalloc_vector_v0", "autoreset_modes": AUTORESET_MODES}
+
+    def __init__(self, num_envs: int, scenario: str | Path | TaskAllocConfig | Mapping[str, Any] | Scenario = "default",
+                 autoreset_mode: str = "next_step", memory_limit_gb: float | None = None, **env_kwargs: Any) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
+                or not 1 <= num_envs <= MAX_NUM_ENVS:
+            raise ConfigError(f"num_envs must be an integer in 1..{MAX_NUM_ENVS:,}, got {num_envs!r}")
+        if autoreset_mode not in AUTORESET_MODES:
+            raise ConfigError(f"autoreset_mode {autoreset_mode!r} is not one of {AUTORESET_MODES}")
+        for key in ("render_mode", "render_path", "mask_in_infos"):
+            if env_kwargs.get(key):
+                raise ConfigError(f"{key}: the batched env does not render or copy masks into infos; "
+                                  "use parallel_env for that")
+        template = TaskAllocEnv(scenario, memory_limit_gb=memory_limit_gb, **env_kwargs)   # checks every option
+        cfg = template.config
+        for field, allowed in UNSUPPORTED.items():
+            if getattr(cfg, field) != allowed:
+                raise ConfigError(f"{field}={getattr(cfg, field)!r}: the batched env keeps every agent for the whole "
+                                  f"episode (a failed agent would leave env.agents); only {allowed!r} is supported")
+        k = int(num_envs)
+        self._check_memory(k, template, memory_limit_gb)
+        self.num_envs = k
+        self.autoreset_mode = autoreset_mode
+        self.config = cfg
+        self.possible_agents = list(template.possible_agents)
+        self.n_agents, self.n_tasks = cfg.n_agents, cfg.n_tasks
+        self.observation_layout = template.observation_layout
+        self.single_observation_space = template.observation_space(self.possible_agents[0])
+        self.single_action_space = template.action_space(self.possible_agents[0])
+        self.single_state_space = template.state_space
+        n, a = self.n_agents, int(self.single_action_space.n)
+        d = self.single_observation_space["observation"].shape[0]
+        box = self.single_observation_space["observation"]
+        self.observation_space = spaces.Dict({
+            "observation": spaces.Box(np.broadcast_to(box.low, (k, n, d)), np.broadcast_to(box.high, (k, n, d)),
+                                      dtype=box.dtype),
+            "action_mask": spaces.Box(0, 1, (k, n, a), dtype=np.int8)})
+        self.action_space = spaces.MultiDiscrete(np.full((k, n), a))
+        self.state_space = spaces.Box(-np.inf, np.inf, (k, template.state_space.shape[0]),
+                                      dtype=template.state_space.dtype)
+        self.invalid_action = template.invalid_action
+        self.envs = [template] + [_clone(template) for _ in range(k - 1)]
+        self._obs = np.zeros((k, n, d), dtype=box.dtype)
+        self._masks = np.zeros((k, n, a), dtype=np.int8)
+        self._ended = np.zeros(k, dtype=bool)            # the instance's episode ended at the last step
+        self._started = False
+
+    @staticmethod
+    def _check_memory(k: int, template: TaskAllocEnv, limit_gb: float | None) -> None:
+        """Refuse K instances whose estimate exceeds ``limit_gb`` (default: the memory available now), before any
+        instance beyond the template exists."""
+        cfg = template.config
+        d = template.observation_space(template.possible_agents[0])["observation"].shape[0]
+        a = int(template.action_space(template.possible_agents[0]).n)
+        per_instance = memory_estimate(cfg.n_agents, cfg.n_tasks, cfg.max_bundle, template._max_agents_per_task,
+                                       cfg.asynchronous) + cfg.n_agents * (8 * d + 2 * a)
+        need = k * per_instance
+        limit = available_memory() if limit_gb is None else limit_gb * 2**30
+        if need > limit:
+            raise ConfigError(f"num_envs={k:,} instances of {cfg.n_agents} agents × {cfg.n_tasks} tasks need about "
+                              f"{need / 2**30:.1f} GiB ({per_instance / 2**20:.1f} MiB each, see "
+                              f"memory.memory_estimate); the limit is {limit / 2**30:.1f} GiB "
+                              f"({'available now' if limit_gb is None else 'memory_limit_gb'})")
+
+    # -- episodes ----------------------------------------------------------------------------------------------
+    def reset(self, seed: int | Sequence[int] | None = None, options: dict | None = None
+              ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """Start every instance: instance k with ``seed + k`` (or ``seed[k]`` for a sequence of K seeds; None
+        continues each instance's own generator)."""
+        seeds = self._seeds(seed)
+        for k, env in enumerate(self.envs):
+            env.reset(seed=seeds[k], options=options)
+            self._write_rows(k)
+        self._ended[:] = False
+        self._started = True
+        return self._handed(), self._infos(np.zeros(self.num_envs, dtype=np.int64))
+
+    def _seeds(self, seed: int | Sequence[int] | None) -> list[int | None]:
+        k = self.num_envs
+        if seed is None:
+            return [None] * k
+        if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            if seed < 0:
+                raise ConfigError(f"seed must be a non-negative integer, got {seed}")
+            return [int(seed) + i for i in range(k)]
+        seeds = list(seed) if isinstance(seed, Sequence) else None
+        if seeds is None or len(seeds) != k or not all(isinstance(s, (int, np.integer)) and not isinstance(s, bool)
+                                                       and s >= 0 for s in seeds):
+            raise ConfigError(f"seed must be None, a non-negative integer or a sequence of {k} of them, got "
+                              f"{type(seed).__name__}")
+        return [int(s) for s in seeds]
+
+    def step(self, actions: Any) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray,
+                                          dict[str, np.ndarray]]:
+        """One joint action per instance, ``actions`` of shape (K, N); see the module docstring for the outputs."""
+        if not self._started:
+            raise InvalidActionError("step() called before reset(); call reset() first")
+        actions = self._checked(actions)
+        k_count, n = self.num_envs, self.n_agents
+        valid = self._valid(actions)
+        invalid = np.count_nonzero(~valid, axis=1)
+        if self.invalid_action == "raise" and invalid.any():
+            self._raise_first(actions, valid)
+        played = np.where(valid, actions, PASS).tolist()
+        rewards = np.zeros(k_count, dtype=np.float64)
+        terminations = np.zeros(k_count, dtype=bool)
+        truncations = np.zeros(k_count, dtype=bool)
+        restarted = self._ended.copy() if self.autoreset_mode == "next_step" else np.zeros(k_count, dtype=bool)
+        final = np.zeros(k_count, dtype=bool)
+        finals: list[tuple[int, np.ndarray, np.ndarray, np.ndarray, dict[str, Any], str | None]] = []
+        unresolved: list[str | None] = [None] * k_count
+        agents = range(n)
+        for k, env in enumerate(self.envs):
+            if restarted[k]:                      # next-step autoreset: the actions of this step are ignored
+                env.reset()
+                invalid[k] = 0
+            else:
+                env.protocol.counters.invalid_actions += int(invalid[k])
+                reward, terminated, truncated = env._advance(list(zip(agents, played[k])))
+                rewards[k], terminations[k], truncations[k] = reward, terminated, truncated
+                if truncated:
+                    unresolved[k] = env.protocol.unresolved
+                if (terminated or truncated) and self.autoreset_mode == "same_step":
+                    obs, masks = env._rows()
+                    finals.append((k, obs, masks.copy(), env.state(), env._figures(), unresolved[k]))
+                    final[k] = True
+                    env.reset()
+            self._write_rows(k)
+        self._ended = (terminations | truncations) & (self.autoreset_mode == "next_step")
+        infos = self._infos(invalid, unresolved)
+        if self.autoreset_mode == "same_step":
+            infos.update(self._finals(finals, final))
+        return self._handed(), np.repeat(rewards[:, None], n, axis=1), terminations, truncations, infos
+
+    # -- actions -----------------------------------------------------------------------------------------------
+    def _checked(self, actions: Any) -> np.ndarray:
+        """``actions`` as a (K, N) int64 array; a wrong shape or dtype is one line naming what was given."""
+        array = np.asarray(actions)
+        if array.dtype == np.bool_ or not np.issubdtype(array.dtype, np.integer):
+            raise InvalidActionError(f"actions must be an integer array of shape ({self.num_envs}, {self.n_agents}),"
+                                     f" got dtype {array.dtype}")
+        if array.shape != (self.num_envs, self.n_agents):
+            raise InvalidActionError(f"actions must have shape (num_envs, n_agents) = ({self.num_envs}, "
+                                     f"{self.n_agents}), got {array.shape}")
+        return array.astype(np.int64, copy=False)
+
+    def _valid(self, actions: np.ndarray) -> np.ndarray:
+        """(K, N) whether each action is in range and allowed by the mask handed out with the last observations;
+        an instance that restarts this step (next-step autoreset) takes any action."""
+        a = self._masks.shape[2]
+        inside = (actions >= 0) & (actions < a)
+        allowed = np.take_along_axis(self._masks, np.where(inside, actions, PASS)[:, :, None], axis=2)[:, :, 0]
+        return (inside & (allowed > 0)) | self._ended[:, None]
+
+    def _raise_first(self, actions: np.ndarray, valid: np.ndarray) -> None:
+        k, i = (int(x) for x in np.argwhere(~valid)[0])
+        action, agent = int(actions[k, i]), self.possible_agents[i]
+        a = self._masks.shape[2]
+        if not 0 <= action < a:
+            raise InvalidActionError(f"instance {k}: action {action} of {agent} is outside Discrete({a})")
+        env = self.envs[k]
+        raise InvalidActionError(f"instance {k}: action {action} ({describe(action, self.n_tasks)}) of {agent} is "
+                                 f"not allowed by its mask: {env._why_masked(agent, action)}")
+
+    # -- outputs -----------------------------------------------------------------------------------------------
+    def _write_rows(self, k: int) -> None:
+        obs, masks = self.envs[k]._rows()
+        self._obs[k] = obs
+        self._masks[k] = masks
+
+    def _handed(self) -> dict[str, np.ndarray]:
+        """The observations as new arrays (editing them leaves the batch's own masks, which check actions, alone)."""
+        return {"observation": self._obs.copy(), "action_mask": self._masks.copy()}
+
+    def _infos(self, invalid: np.ndarray, unresolved: Sequence[str | None] | None = None) -> dict[str, np.ndarray]:
+        rows = [env._figures() for env in self.envs]
+        infos = {key: np.array([row[key] for row in rows], dtype=dtype) for key, dtype in INFO_KEYS.items()}
+        infos["invalid_actions"] = invalid.astype(np.int64)
+        infos["passed"] = np.stack([env._engine.passed for env in self.envs])
+        infos["unresolved"] = np.array(unresolved if unresolved is not None else [None] * self.num_envs,
+                                       dtype=object)
+        return infos
+
+    def _finals(self, finals: Sequence[tuple], final: np.ndarray) -> dict[str, Any]:
+        """The last observation, state and figures of the instances that ended this step (same-step autoreset)."""
+        k_count = self.num_envs
+        obs = np.zeros_like(self._obs)
+        masks = np.zeros_like(self._masks)
+        states = np.zeros(self.state_space.shape, dtype=self.state_space.dtype)
+        info = {key: np.zeros(k_count, dtype=dtype) for key, dtype in INFO_KEYS.items()}
+        info["unresolved"] = np.array([None] * k_count, dtype=object)
+        for k, o, m, s, figures, why in finals:
+            obs[k], masks[k], states[k] = o, m, s
+            for key in INFO_KEYS:
+                info[key][k] = figures[key]
+            info["unresolved"][k] = why
+        return {"final_obs": {"observation": obs, "action_mask": masks}, "final_state": states,
+                "final_info": info, "_final": final}
+
+    def state(self) -> np.ndarray:
+        """(K, S) the global state of every instance (``observation.state_vector``)."""
+        if not self._started:
+            raise RuntimeError("call reset() before state()")
+        return np.stack([state_vector(env.protocol) for env in self.envs]).astype(self.state_space.dtype)
+
+    def evaluate(self, k: int) -> Any:
+        """Instance k's allocation as it stands (``TaskAllocEnv.evaluate``)."""
+        return self.envs[k].evaluate()
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+
+def _clone(template: TaskAllocEnv) -> TaskAllocEnv:
+    """A copy of an unstarted env with its own unseeded generator (copying costs a tenth of a construction)."""
+    env = copy.deepcopy(template)
+    env._np_random, env._np_random_seed = seeding.np_random()
+    return env
