@@ -25,7 +25,10 @@ Autoreset (``autoreset_mode``):
   first observation with zero reward and both flags false;
 * ``"same_step"`` (stable-baselines3's convention): an instance that ends is reset within the same step; its last
   observation, state and figures are in ``infos["final_obs"]``, ``infos["final_state"]`` and
-  ``infos["final_info"]``, valid where ``infos["_final"]`` is set.
+  ``infos["final_info"]``, valid where ``infos["_final"]`` is set;
+* ``"disabled"`` (TorchRL's convention): an instance that ended waits for ``reset(options={"reset_mask": m})``, which
+  restarts the instances where the (K,) boolean ``m`` is set and leaves the others as they are; stepping an ended
+  instance is an error.
 
 Supported: every option of the single env except agent drop-outs (``dropouts``, ``dropout_schedule``: a failed
 agent leaves ``env.agents``, which a fixed (K, N) layout cannot express) and rendering. Today each instance is
@@ -51,7 +54,7 @@ from taskalloc_env.memory import available_memory, memory_estimate
 from taskalloc_env.observation import state_vector
 from taskalloc_env.scenario import Scenario
 
-AUTORESET_MODES = ("next_step", "same_step")
+AUTORESET_MODES = ("next_step", "same_step", "disabled")
 # the figures of every instance after each step, arrays of length K (``TaskAllocEnv._figures`` per instance)
 INFO_KEYS = {"score": np.float64, "valid_tasks": np.int64, "conflicts": np.int64, "round": np.int64,
              "messages": np.int64, "data_items": np.int64, "converged": np.bool_}
@@ -90,6 +93,7 @@ class TaskAllocVectorEnv:
         self._check_memory(k, template, memory_limit_gb)
         self.num_envs = k
         self.autoreset_mode = autoreset_mode
+        self.render_mode = None                         # the batch does not render (Gymnasium's attribute)
         self.config = cfg
         self.possible_agents = list(template.possible_agents)
         self.n_agents, self.n_tasks = cfg.n_agents, cfg.n_tasks
@@ -136,13 +140,28 @@ class TaskAllocVectorEnv:
               ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
         """Start every instance: instance k with ``seed + k`` (or ``seed[k]`` for a sequence of K seeds; None
         continues each instance's own generator)."""
+        options = dict(options or {})
+        chosen = self._reset_mask(options.pop("reset_mask", None))
         seeds = self._seeds(seed)
-        for k, env in enumerate(self.envs):
-            env.reset(seed=seeds[k], options=options)
+        for k in np.flatnonzero(chosen).tolist():
+            self.envs[k].reset(seed=seeds[k], options=options or None)
             self._write_rows(k)
-        self._ended[:] = False
+        self._ended &= ~chosen
         self._started = True
         return self._handed(), self._infos(np.zeros(self.num_envs, dtype=np.int64))
+
+    def _reset_mask(self, mask: Any) -> np.ndarray:
+        """(K,) the instances a reset restarts: all, or those set in ``options["reset_mask"]`` (after the first
+        reset)."""
+        if mask is None:
+            return np.ones(self.num_envs, dtype=bool)
+        array = np.asarray(mask)
+        if array.dtype != np.bool_ or array.shape != (self.num_envs,):
+            raise ConfigError(f"options['reset_mask'] must be a boolean array of shape ({self.num_envs},), got "
+                              f"{array.dtype} {array.shape}")
+        if not self._started and not array.all():
+            raise ConfigError("the first reset() starts every instance; options['reset_mask'] comes after it")
+        return array.copy()
 
     def _seeds(self, seed: int | Sequence[int] | None) -> list[int | None]:
         k = self.num_envs
@@ -168,13 +187,17 @@ class TaskAllocVectorEnv:
         k_count, n = self.num_envs, self.n_agents
         valid = self._valid(actions)
         invalid = np.count_nonzero(~valid, axis=1)
+        if self.autoreset_mode == "disabled" and self._ended.any():
+            raise InvalidActionError(f"instance {int(np.flatnonzero(self._ended)[0])} ended: restart it with "
+                                     "reset(options={'reset_mask': mask}) before the next step (autoreset_mode="
+                                     "'disabled')")
         if self.invalid_action == "raise" and invalid.any():
             self._raise_first(actions, valid)
         played = np.where(valid, actions, PASS).tolist()
         rewards = np.zeros(k_count, dtype=np.float64)
         terminations = np.zeros(k_count, dtype=bool)
         truncations = np.zeros(k_count, dtype=bool)
-        restarted = self._ended.copy() if self.autoreset_mode == "next_step" else np.zeros(k_count, dtype=bool)
+        restarted = self._ended.copy()         # next-step autoreset (under "disabled" no instance has ended here)
         final = np.zeros(k_count, dtype=bool)
         finals: list[tuple[int, np.ndarray, np.ndarray, np.ndarray, dict[str, Any], str | None]] = []
         unresolved: list[str | None] = [None] * k_count
@@ -195,7 +218,7 @@ class TaskAllocVectorEnv:
                     final[k] = True
                     env.reset()
             self._write_rows(k)
-        self._ended = (terminations | truncations) & (self.autoreset_mode == "next_step")
+        self._ended = (terminations | truncations) & (self.autoreset_mode != "same_step")
         infos = self._infos(invalid, unresolved)
         if self.autoreset_mode == "same_step":
             infos.update(self._finals(finals, final))
