@@ -50,6 +50,20 @@ def test_torchrl_checks_specs_and_rolls_out_batched():
 
 
 @pytest.mark.slow
+def test_maskable_ppo_trains_on_the_batched_env():
+    pytest.importorskip("sb3_contrib")
+    result = recipe("sb3_batched").main(steps=512)
+    assert result["MaskablePPO"] == 512 and result["episodes"] > 0
+
+
+@pytest.mark.slow
+def test_torchrl_rolls_out_the_batched_env():
+    pytest.importorskip("torchrl")
+    result = recipe("torchrl_batched").main(steps=60)
+    assert result["rollout"] == (8, 60) and result["episodes"] > 0
+
+
+@pytest.mark.slow
 def test_tianshou_plays_the_aec_view():
     pytest.importorskip("tianshou")
     result = recipe("tianshou_aec").main(episodes=2, dqn_steps=64)

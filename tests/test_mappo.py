@@ -185,3 +185,27 @@ def test_a_short_run_improves_on_its_starting_policy(tmp_path):
     policy = LearnedPolicy.load(tmp_path)
     assert np.mean([rollout(env, policy, seed=s).score for s in seeds]) == pytest.approx(last)
     assert summary["parameters"]["critic"] > 0 and summary["agent_steps_per_second"] > 0
+
+
+def test_a_group_on_the_batched_env_plays_the_episodes_of_separate_copies():
+    """Without a partner a group steps one batched env; the same seeds and actions give the same observations,
+    rewards, episode ends, cut states and scores as stepping separate env copies (the path a partner needs)."""
+    cfg = mappo.MappoConfig()
+    entry = {"scenario": "train_small", "copies": 3}
+    batched = mappo.Group(entry, cfg.env_overrides, 12, 0)
+    separate = mappo.Group(entry, cfg.env_overrides, 12, 0)
+    separate.batch = None                         # the per-copy path, as with a partner that plays no round
+    separate.envs = [TaskAllocEnv(**separate.env_kwargs, max_cycles=12, reward_scale=separate.reward_scale)
+                     for _ in range(3)]
+    separate.partner = None
+    batched.reset(), separate.reset()
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        for name in ("obs", "masks", "states"):
+            assert np.array_equal(getattr(batched, name), getattr(separate, name)), name
+        actions = (rng.random(batched.masks.shape) * batched.masks).argmax(axis=2)
+        r_b, d_b, c_b = batched.step(actions)
+        r_s, d_s, c_s = separate.step(actions)
+        assert np.array_equal(r_b, r_s) and np.array_equal(d_b, d_s)
+        assert all((a is None and b is None) or np.array_equal(a, b) for a, b in zip(c_b, c_s))
+    assert batched.scores == separate.scores and len(batched.scores) >= 3

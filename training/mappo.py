@@ -223,7 +223,7 @@ class Rollout:
 
 def collect(model: ActorCritic, group: Group, n_steps: int, gamma: float, gae_lambda: float) -> Rollout:
     """``n_steps`` steps of every copy of ``group``; GAE(λ) on the critic's values (Schulman et al. 2016)."""
-    c, n = len(group.envs), group.n_agents
+    c, n = group.copies, group.n_agents
     obs, masks, actions, logprobs, states, values, rewards, dones = ([] for _ in range(8))
     for _ in range(n_steps):        # copies: the group's arrays are overwritten in place by the next step
         o = th.tensor(group.obs, dtype=th.float32).reshape(c * n, -1)
@@ -389,7 +389,7 @@ def main(argv: Sequence[str] | None = None, hook: PartnerHook | None = None) -> 
     groups, first, partner = [], cfg.seed * 1000, hook.partner(cfg) if hook is not None else None
     for entry in cfg.mixture:
         groups.append(Group(entry, cfg.env_overrides, cfg.max_cycles, first, partner))
-        first += len(groups[-1].envs)
+        first += groups[-1].copies
     layout = groups[0].layout
     for g in groups:
         if (g.layout.own_names, g.layout.task_names) != (layout.own_names, layout.task_names):
@@ -420,8 +420,8 @@ def main(argv: Sequence[str] | None = None, hook: PartnerHook | None = None) -> 
             param_group["lr"] = lr
         active = [g for g in groups if g.from_steps <= steps]
         rollouts = [collect(model, g, cfg.n_steps, cfg.gamma, cfg.gae_lambda) for g in active]
-        steps += sum(cfg.n_steps * len(g.envs) * g.n_agents for g in active)
-        env_steps += sum(cfg.n_steps * len(g.envs) for g in active)
+        steps += sum(cfg.n_steps * g.copies * g.n_agents for g in active)
+        env_steps += sum(cfg.n_steps * g.copies for g in active)
         stats = update(model, optimizer, rollouts, cfg, rng)
         update_i += 1
         finished = [s for g in active for s in g.scores]

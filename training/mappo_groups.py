@@ -13,6 +13,7 @@ from torch import nn
 from taskalloc.policies.base import Policy, stack_observations
 from taskalloc_env.config import resolve_config
 from taskalloc_env.env import TaskAllocEnv
+from taskalloc_env.vector import vector_env
 
 
 # -- environments: one group of copies per mixture entry ----------------------------------------------------------
@@ -45,7 +46,11 @@ class PartnerHook(Protocol):
 
 
 class Group:
-    """The env copies of one mixture entry (one size), stepped together; rewards in units of c̄ · N."""
+    """The env copies of one mixture entry (one size), stepped together; rewards in units of c̄ · N.
+
+    Without a partner the copies are the instances of one batched env (``taskalloc_env.vector_env``, same-step
+    autoreset: the same episodes as separate copies, without the dict API); with a partner, separate envs, because
+    the partner's policies act on each env's dict observations."""
 
     def __init__(self, entry: Mapping[str, Any], env_overrides: Mapping[str, Any], max_cycles: int,
                  first_seed: int, partner: Partner | None = None) -> None:
@@ -55,8 +60,11 @@ class Group:
         config = resolve_config(entry["scenario"], **dict(entry.get("overrides") or {}))
         self.env_kwargs = {"scenario": config, **env_overrides}
         self.reward_scale = float(config.reward) * config.n_agents
-        self.envs = [TaskAllocEnv(**self.env_kwargs, max_cycles=max_cycles, reward_scale=self.reward_scale)
-                     for _ in range(int(entry.get("copies", 1)))]
+        self.copies = int(entry.get("copies", 1))
+        kwargs = {**self.env_kwargs, "max_cycles": max_cycles, "reward_scale": self.reward_scale}
+        self.batch = vector_env(self.copies, autoreset_mode="same_step", **kwargs) if partner is None else None
+        self.envs = (self.batch.envs if self.batch is not None
+                     else [TaskAllocEnv(**kwargs) for _ in range(self.copies)])
         env = self.envs[0]
         self.agents = list(env.possible_agents)
         self.n_agents, self.n_tasks = config.n_agents, config.n_tasks
@@ -68,6 +76,10 @@ class Group:
 
     def reset(self) -> None:
         """Copy i starts from seed ``first_seed + i``; later episodes continue that copy's generator."""
+        if self.batch is not None:
+            obs, _ = self.batch.reset(seed=self.first_seed)
+            self.obs, self.masks, self.states = obs["observation"], obs["action_mask"], self.batch.state()
+            return
         rows = [self._observe(env, self._begin(env, self.first_seed + i)) for i, env in enumerate(self.envs)]
         self.obs, self.masks, self.states = (np.stack(x) for x in zip(*rows))
 
@@ -101,6 +113,8 @@ class Group:
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[np.ndarray | None]]:
         """Step every copy (and the partner's rounds that follow); (rewards (C,), episode ends (C,), the last state
         of each copy cut by max_cycles)."""
+        if self.batch is not None:
+            return self._step_batch(actions)
         rewards, dones, cut = np.zeros(len(self.envs)), np.zeros(len(self.envs), dtype=bool), []
         for i, env in enumerate(self.envs):
             obs, reward, terminated, truncated, infos = env.step(dict(zip(self.agents, actions[i].tolist())))
@@ -116,3 +130,14 @@ class Group:
                 obs = self._begin(env)
             self.obs[i], self.masks[i], self.states[i] = self._observe(env, obs)
         return rewards, dones, cut
+
+    def _step_batch(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[np.ndarray | None]]:
+        """``step`` on the batched env: one call for every copy."""
+        obs, rewards, terminated, truncated, infos = self.batch.step(actions)
+        dones = terminated | truncated
+        cut: list[np.ndarray | None] = [None] * self.copies
+        for k in np.flatnonzero(truncated & ~terminated).tolist():
+            cut[k] = infos["final_state"][k]
+        self.scores.extend(infos["final_info"]["score"][dones].tolist())
+        self.obs, self.masks, self.states = obs["observation"], obs["action_mask"], self.batch.state()
+        return rewards[:, 0].copy(), dones, cut
