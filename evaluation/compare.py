@@ -2,7 +2,7 @@
 
     taskalloc compare --scenario default --episodes 20 --out results/compare
 
-Rows: random, CBBA and CBAA (only where every L_j = 1), CBGA, CBGA+TQ, CBGA+TB, CBGABI, the centralised greedy SGAMA
+Rows: random, CBBA, CBAA and PI (only where every L_j = 1), CBGA, CBGA+TQ, CBGA+TB, CBGABI, the centralised greedy SGAMA
 (thesis §3.3.3, Alg 7; no rounds or messages), the centralised group search LNS (``taskalloc.policies.local_search``,
 ours: a lower bound on the optimum, how much there is to take) and the default learned rows ``DEFAULT_LEARNED`` (two
 committed models, when their observation layout fits the scenario; ``--learned`` names others; ``--policy`` adds rows: a
@@ -44,7 +44,7 @@ from taskalloc_env import TaskAllocConfig, resolve_config, resources
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError
 
-BASELINES = ("random", "cbba", "cbaa", "cbga", "cbga+tq", "cbga+tb", "cbgabi", "sgama", "lns")
+BASELINES = ("random", "cbba", "cbaa", "pi", "cbga", "cbga+tq", "cbga+tb", "cbgabi", "sgama", "lns")
 REFERENCE = "CBGA"
 COLUMNS = (("score", "score"), ("valid_tasks", "valid tasks"), ("rounds", "rounds"),
            ("comm_steps_to_agreement", "msgs / agent to agreement"), ("comm_steps", "msgs / agent to the end"))

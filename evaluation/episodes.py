@@ -52,8 +52,8 @@ METRICS = ("score", "valid_tasks", "conflicts", "rounds", "messages", "comm_step
            "quits_seen", "messages_lost", "messages_delayed", "data_received_per_agent", "data_sent_per_agent",
            "data_per_assignment", "data_per_agent_per_assignment", "conflicting_bids_per_agent", "dropped_agents",
            "connected", "fully_connected")
-# policies of single-agent tasks only (every L_j = 1): CBBA, ACBBA, CBAA
-SINGLE_AGENT_TASKS = ("cbba", "acbba", "cbaa")
+# policies of single-agent tasks only (every L_j = 1): CBBA, ACBBA, CBAA, PI
+SINGLE_AGENT_TASKS = ("cbba", "acbba", "cbaa", "pi")
 SUMMARY_FIELDS = ("score", "valid_tasks", "rounds", "messages")
 PROTOCOL_METRICS = ("rounds", "messages", "comm_steps", "rounds_to_agreement", "comm_steps_to_agreement",
                     "invalid_actions", "informative_messages", "data_items", "quits", "quits_seen", "messages_lost",

@@ -6,6 +6,7 @@ from taskalloc.policies.base import Policy
 from taskalloc.policies.cbaa import CBAAPolicy
 from taskalloc.policies.centralised import exact, sgama
 from taskalloc.policies.local_search import local_search
+from taskalloc.policies.pi import PIPolicy
 from taskalloc.policies.registry import POLICY_NAMES, make_policy, register_checkpoint_loader, register_policy
 from taskalloc.policies.rollout import rollout
 from taskalloc.policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
@@ -16,6 +17,7 @@ __all__ = [
     "CBAAPolicy",
     "CBBAPolicy",
     "CBGAPolicy",
+    "PIPolicy",
     "PassPolicy",
     "Policy",
     "RandomPolicy",
