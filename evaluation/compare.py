@@ -2,12 +2,12 @@
 
     taskalloc compare --scenario default --episodes 20 --out results/compare
 
-Rows: random, CBBA (only where every L_j = 1), CBGA, CBGA+TQ, CBGA+TB, CBGABI, the centralised greedy SGAMA (thesis
-§3.3.3, Alg 7; no rounds or messages), the centralised group search LNS (``taskalloc.policies.local_search``, ours: a
-lower bound on the optimum, how much there is to take) and the default learned rows ``DEFAULT_LEARNED`` (two committed
-models, when their observation layout fits the scenario; ``--learned`` names others; ``--policy`` adds rows: a policy
-name, or your own policy by import path ``mypkg.mymodule:MyPolicy``). Seed s is the same instance for
-every row (paired design, thesis §5.3.1). The table gives mean ± sd of the score (``scoring.team_score``), valid tasks,
+Rows: random, CBBA, CBAA and PI (only where every L_j = 1), CBGA, CBGA+TQ, CBGA+TB, CBGABI, the centralised greedy SGAMA
+(thesis §3.3.3, Alg 7; no rounds or messages), the centralised group search LNS (``taskalloc.policies.local_search``,
+ours: a lower bound on the optimum, how much there is to take) and the default learned rows ``DEFAULT_LEARNED`` (two
+committed models, when their observation layout fits the scenario; ``--learned`` names others; ``--policy`` adds rows: a
+policy name, or your own policy by import path ``mypkg.mymodule:MyPolicy``). Seed s is the same instance for every
+row (paired design, thesis §5.3.1). The table gives mean ± sd of the score (``scoring.team_score``), valid tasks,
 consensus rounds and messages received (``msgs / agent`` = messages / N_n, the thesis's per-agent communication steps),
 episodes that hit the round bound (kept, counted), and the paired comparison with CBGA (mean difference, paired t-test
 p-value, share of seeds won). ``--out DIR`` writes ``compare.md``, ``compare.csv`` (the table), ``episodes.csv`` and
@@ -44,7 +44,7 @@ from taskalloc_env import TaskAllocConfig, resolve_config, resources
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError
 
-BASELINES = ("random", "cbba", "cbga", "cbga+tq", "cbga+tb", "cbgabi", "sgama", "lns")
+BASELINES = ("random", "cbba", "cbaa", "pi", "cbga", "cbga+tq", "cbga+tb", "cbgabi", "sgama", "lns")
 REFERENCE = "CBGA"
 COLUMNS = (("score", "score"), ("valid_tasks", "valid tasks"), ("rounds", "rounds"),
            ("comm_steps_to_agreement", "msgs / agent to agreement"), ("comm_steps", "msgs / agent to the end"))

@@ -52,6 +52,8 @@ METRICS = ("score", "valid_tasks", "conflicts", "rounds", "messages", "comm_step
            "quits_seen", "messages_lost", "messages_delayed", "data_received_per_agent", "data_sent_per_agent",
            "data_per_assignment", "data_per_agent_per_assignment", "conflicting_bids_per_agent", "dropped_agents",
            "connected", "fully_connected")
+# policies of single-agent tasks only (every L_j = 1): CBBA, ACBBA, CBAA, PI
+SINGLE_AGENT_TASKS = ("cbba", "acbba", "cbaa", "pi")
 SUMMARY_FIELDS = ("score", "valid_tasks", "rounds", "messages")
 PROTOCOL_METRICS = ("rounds", "messages", "comm_steps", "rounds_to_agreement", "comm_steps_to_agreement",
                     "invalid_actions", "informative_messages", "data_items", "quits", "quits_seen", "messages_lost",
@@ -72,7 +74,7 @@ class Episode:
 def skip_reason(solver: str, cfg: TaskAllocConfig) -> str | None:
     """Why ``solver`` does not apply to ``cfg`` (None if it does): CBBA needs every L_j = 1, exact small sizes."""
     key = solver.lower()
-    if key in ("cbba", "acbba") and max_required_agents(cfg) > 1:
+    if key in SINGLE_AGENT_TASKS and max_required_agents(cfg) > 1:
         return f"{key.upper()} assigns single-agent tasks only (every L_j = 1)"
     if key == "cbba-duo" and (max_required_agents(cfg) > 1 or cfg.prerequisites or cfg.comm_range is not None):
         return "preferred-duo CBBA splits single-agent tasks without prerequisites, with full communication"

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 from taskalloc.policies.base import Policy
+from taskalloc.policies.cbaa import CBAAPolicy
 from taskalloc.policies.centralised import exact, sgama
 from taskalloc.policies.local_search import local_search
+from taskalloc.policies.pi import PIPolicy
 from taskalloc.policies.registry import POLICY_NAMES, make_policy, register_checkpoint_loader, register_policy
 from taskalloc.policies.rollout import rollout
 from taskalloc.policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
@@ -12,8 +14,10 @@ from taskalloc.policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, Pas
 __all__ = [
     "POLICY_NAMES",
     "ACBBAPolicy",
+    "CBAAPolicy",
     "CBBAPolicy",
     "CBGAPolicy",
+    "PIPolicy",
     "PassPolicy",
     "Policy",
     "RandomPolicy",

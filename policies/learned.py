@@ -108,6 +108,9 @@ class LearnedPolicy(Policy):
 
     def start(self, env: Any, seed: int | None = None) -> None:
         super().start(env, seed)
+        if self.env.config.release_actions:
+            raise ValueError(f"{self.name} acts in the 1 + 2M layout (pass, bids, quits); its actor has no release "
+                             "actions: build the environment without release_actions")
         layout = self.layout
         columns = feature_columns(layout, self.own_features, self.task_features)
         if columns is False:

@@ -37,6 +37,9 @@ class Counters:
     # quitter from that task's group in the table of an agent that listed it, before the quitter bid on it again
     quits_seen: int = 0
     invalid_actions: int = 0    # actions outside the mask turned into passes (invalid_action="noop")
+    # release actions taken (release_actions): kept out of the repr, so that a run without the option prints, and
+    # digests (benchmarks.episode_digests), exactly as before the option existed; summary() and asdict() carry it
+    releases: int = dataclasses.field(default=0, repr=False)
     # the round after which no table or bundle changed again, and the messages sent until then: the thesis's stop
     # "when all agents converge to the same conflict-free solution" (§3.2.3), before our D + 1 quiet rounds confirm it
     rounds_to_agreement: int = 0

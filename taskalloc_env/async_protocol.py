@@ -116,6 +116,13 @@ class AsyncProtocol(Protocol):
         self._withdrawn(agent, [task, *released], held)
         return released
 
+    def release(self, agent: int, task: int) -> list[int]:
+        """Protocol.release; the withdrawn entries go out with the current time, as a quit's do."""
+        held = self.knowledge.own_bids()[agent] > 0
+        released = super().release(agent, task)
+        self._withdrawn(agent, [task, *released], held)
+        return released
+
     def finish(self, agent: int) -> None:
         """The agent passed: its build is complete; its outgoing buffer goes out as one broadcast (line 763)."""
         self.ready_at[agent] = IDLE

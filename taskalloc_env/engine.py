@@ -15,33 +15,38 @@ from collections.abc import Iterable
 import numpy as np
 
 from taskalloc_env import kernels
-from taskalloc_env.actions import PASS, ActionKind, bid_columns, decode, n_actions, quit_columns
+from taskalloc_env.actions import PASS, ActionKind, bid_columns, decode, n_actions, quit_columns, release_columns
 from taskalloc_env.kernels.masks import fill_masks
 from taskalloc_env.protocol import Protocol
 
-_PASS, _BID = ActionKind.PASS, ActionKind.BID         # looked up once: the loop of ``apply`` compares to them
+_PASS, _BID, _QUIT = ActionKind.PASS, ActionKind.BID, ActionKind.QUIT   # looked up once: ``apply``'s loop compares
 
 
-def action_masks(can_bid: np.ndarray, can_quit: np.ndarray, passed: np.ndarray) -> np.ndarray:
+def action_masks(can_bid: np.ndarray, can_quit: np.ndarray, passed: np.ndarray,
+                 can_release: np.ndarray | None = None) -> np.ndarray:
     """(N, 1 + 2M) int8: pass always; the valid bids and the allowed quits of every agent that has not ``passed``
-    (a passed agent may only pass until the round ends; under ``acbba``, until its builder is ready). Compiled
+    (a passed agent may only pass until the round ends; under ``acbba``, until its builder is ready); with
+    ``can_release`` (``release_actions``), (N, 1 + 3M) with the allowed releases too. Compiled
     (``kernels.masks.fill_masks``) when numba is there, else ``action_masks_reference``."""
     if not kernels.COMPILED:
-        return action_masks_reference(can_bid, can_quit, passed)
+        return action_masks_reference(can_bid, can_quit, passed, can_release)
     n, m = can_bid.shape
-    mask = np.empty((n, n_actions(m)), dtype=np.int8)
-    fill_masks(can_bid, can_quit, passed, mask)
+    mask = np.empty((n, n_actions(m, can_release is not None)), dtype=np.int8)
+    fill_masks(can_bid, can_quit, can_quit if can_release is None else can_release, passed, mask)
     return mask
 
 
-def action_masks_reference(can_bid: np.ndarray, can_quit: np.ndarray, passed: np.ndarray) -> np.ndarray:
+def action_masks_reference(can_bid: np.ndarray, can_quit: np.ndarray, passed: np.ndarray,
+                           can_release: np.ndarray | None = None) -> np.ndarray:
     """``action_masks`` in numpy (the reference of ``kernels.masks.fill_masks``)."""
     n, m = can_bid.shape
-    mask = np.empty((n, n_actions(m)), dtype=np.int8)
+    mask = np.empty((n, n_actions(m, can_release is not None)), dtype=np.int8)
     mask[:, PASS] = 1
     acting = ~passed[:, None]
     np.logical_and(can_bid, acting, out=mask[:, bid_columns(m)])
     np.logical_and(can_quit, acting, out=mask[:, quit_columns(m)])
+    if can_release is not None:
+        np.logical_and(can_release, acting, out=mask[:, release_columns(m)])
     return mask
 
 
@@ -55,7 +60,8 @@ class StepEngine:
         self.steps = 0
         self.passed = self.waiting()
         m = protocol.scenario.n_tasks
-        self._decoded = [decode(action, m) for action in range(n_actions(m))]   # a lookup costs less than a call
+        self.release = protocol.cfg.release_actions
+        self._decoded = [decode(action, m) for action in range(n_actions(m, self.release))]   # a lookup beats a call
 
     def waiting(self) -> np.ndarray:
         """(N,) agents that may only pass: none at the start of a synchronous round; under ``acbba`` every agent whose
@@ -65,8 +71,10 @@ class StepEngine:
         return np.zeros(self.protocol.scenario.n_agents, dtype=bool)
 
     def masks(self) -> np.ndarray:
-        """(N, 1 + 2M) int8 action masks of every agent now (``action_masks``)."""
-        return action_masks(self.protocol.view().can_bid, self.protocol.quit_options(), self.passed)
+        """(N, 1 + 2M) int8 action masks of every agent now (``action_masks``); (N, 1 + 3M) with ``release_actions``."""
+        protocol = self.protocol
+        releases = protocol.release_options() if self.release else None
+        return action_masks(protocol.view().can_bid, protocol.quit_options(), self.passed, releases)
 
     def acting(self) -> np.ndarray:
         """The agents that may do more than pass, in agent order."""
@@ -89,8 +97,11 @@ class StepEngine:
             elif kind is _BID:
                 protocol.bid(i, task, view=view)
                 passed[i] = False
-            else:
+            elif kind is _QUIT:
                 protocol.quit(i, task)
+                passed[i] = False
+            else:
+                protocol.release(i, task)
                 passed[i] = False
         self.steps += 1
         if self.asynchronous:

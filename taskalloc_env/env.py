@@ -6,8 +6,10 @@ Create it with ``pettingzoo.make("parallel", "taskalloc/TaskAlloc-v0", ...)`` (o
 =====================  ==============================================================================
 Agents                 ``uav_0 … uav_{N-1}`` (N = ``n_agents``, default 10)
 Parallel API           yes (AEC through ``parallel_to_aec``)
-Action space           ``Discrete(1 + 2M)``: 0 pass, 1..M bid on task j−1, M+1..2M quit task j−M−1
-Observation space      ``Dict(observation=Box(D,) float32, action_mask=Box(0, 1, (1 + 2M,), int8))`` (``dtype``)
+Action space           ``Discrete(1 + 2M)``: 0 pass, 1..M bid on task j−1, M+1..2M quit task j−M−1; with
+                       ``release_actions`` ``Discrete(1 + 3M)``: 2M+1..3M release task j−2M−1
+Observation space      ``Dict(observation=Box(D,) float32, action_mask=Box(0, 1, (A,), int8))``, A = the action
+                       space's size (``dtype``)
 State space            ``Box`` of agent/task attributes, every agent's own bids and the round
 Reward                 cooperative, potential-based: every agent gets Δ team score (÷ ``reward_scale``)
 Termination            the allocation converged: every live agent agrees (no table changed for D + 1 rounds; our
@@ -141,7 +143,8 @@ class TaskAllocEnv(ParallelEnv):
         # round ends when all have passed; before that an agent's steps are its bids (each adds a task to its
         # bundle; only its own quits, at most one per task, each dropping at most M tasks, make room again: at most
         # M + M² bids), its quits (at most M) and the pass, (M + 1)² in all; every_step and acbba: a round (tick)
-        # per step
+        # per step. Release actions lift the bound on a sync round's bids (release, re-bid, …): the default then cuts
+        # an episode whose agents never stop doing that
         per_round = (m + 1) ** 2 if self.config.consensus == "sync" else 1
         self.step_bound = self._max_rounds * per_round
         self.max_cycles = max_cycles if max_cycles is not None else self.step_bound
@@ -149,9 +152,9 @@ class TaskAllocEnv(ParallelEnv):
         self.observation_layout = builder.layout
         self._observation_space = spaces.Dict({
             "observation": builder.space(self.dtype),
-            "action_mask": spaces.Box(0, 1, (n_actions(m),), dtype=np.int8),
+            "action_mask": spaces.Box(0, 1, (n_actions(m, self.config.release_actions),), dtype=np.int8),
         })
-        self._action_space = spaces.Discrete(n_actions(m))
+        self._action_space = spaces.Discrete(n_actions(m, self.config.release_actions))
         state_size = len(state_vector(probe_protocol))
         self.state_space = spaces.Box(-np.inf, np.inf, (state_size,), dtype=self.dtype)
 
@@ -316,11 +319,13 @@ class TaskAllocEnv(ParallelEnv):
         kind, task = decode(action, self.config.n_tasks)
         if kind is ActionKind.BID:
             return self.protocol.explain_bid(i, task)
+        if kind is ActionKind.RELEASE:
+            return f"task {task} is not in {agent}'s bundle {self.protocol.knowledge.bundles[i]}"
         return "quitting needs task_quitting on, L_j > 1, membership, an incomplete group, no earlier quit, " \
                f"and T − H > delta = {self.config.delta}"
 
     def describe_action(self, action: int) -> str:
-        """``pass``, ``bid on task j`` or ``quit task j``."""
+        """``pass``, ``bid on task j``, ``quit task j`` or ``release task j``."""
         return describe(action, self.config.n_tasks)
 
     # -- outputs ---------------------------------------------------------------------------------------------------

@@ -242,6 +242,29 @@ class Protocol:
         self._touch(agent)
         return released
 
+    def release_options(self) -> np.ndarray:
+        """(N, M) releases the protocol allows now (``release_actions``): every task of the agent's own bundle, where
+        an outbid release could start (thesis §2.2.4); none with the option off."""
+        if not self.cfg.release_actions:
+            return self._no_quits
+        return self.view().in_bundle
+
+    def release(self, agent: int, task: int) -> list[int]:
+        """Agent gives ``task`` up of its own accord (``release_actions``; ours): ``task`` and every task after it
+        leave its bundle and path and its own bids on them are zeroed, exactly as when it is outbid on ``task``
+        (``LocalKnowledge.release`` with ``release_order``; thesis §2.2.4, Johnson (3.11)–(3.12)); Phase 2 spreads
+        it. Returns the released tasks after ``task``."""
+        if not self.cfg.release_actions:
+            raise ProtocolError(f"agent {agent} may not release task {task}: release actions need "
+                                "release_actions=True")
+        if not self.release_options()[agent, task]:
+            raise ProtocolError(f"agent {agent} may not release task {task}: it is not in its bundle "
+                                f"{self.knowledge.bundles[agent]}")
+        released = self.knowledge.release(agent, task, self.cfg.release_order)
+        self.counters.releases += 1
+        self._touch(agent)
+        return released
+
     # -- Phase 2 and clean-up ------------------------------------------------------------------------------------
     def end_round(self) -> Traffic:
         """Drop-outs, sending and delivery, silent agents, outbid release, quit timers and the convergence test."""

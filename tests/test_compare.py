@@ -32,7 +32,7 @@ def test_cbba_row_appears_when_every_task_needs_one_agent(capsys):
     main(["compare", "--episodes", "2", "--set", "agents_per_task=1", "--set", "n_agents=4", "--set", "n_tasks=8",
           "--no-learned"])
     rows = _table_rows(capsys.readouterr().out)
-    assert set(rows) == {*BASELINE_ROWS, "CBBA"}
+    assert set(rows) == {*BASELINE_ROWS, "CBBA", "CBAA", "PI"}
 
 
 @pytest.mark.slow

@@ -21,6 +21,10 @@ PROTOCOL_GROUP = group("protocol", (
     Field('task_quitting', 'bool', default=False,
           meaning='quit actions allowed (Alg 9)',
           source='thesis §5.2.2'),
+    Field('release_actions', 'bool', default=False,
+          meaning=('release actions allowed: an agent may drop a task of its own bundle and every task after it, as '
+                   'an outbid release does (the action space grows to 1 + 3M)'),
+          source='ours (the release rule: thesis §2.2.4; Johnson (3.11)–(3.12)); PI needs it (Zhao et al. 2016)'),
     Field('delta', 'int', low=0, time_like=True, default=1,
           meaning=('δ: rounds an incomplete group is held before a quit is allowed; the scripted CBGA+TQ and CBGABI '
                    'quit with this δ'),
