@@ -132,6 +132,7 @@ class AsyncProtocol(Protocol):
         c = self.counters
         c.broadcasts += 1
         c.messages_sent += sent.sent
+        c.max_agent_messages = max(c.max_agent_messages, int(self.network.sent_by[agent]))
         c.messages_lost += sent.lost
         c.messages_delayed += sent.delayed
         c.data_items_sent += sent.data_items

@@ -278,6 +278,7 @@ class Protocol:
         c.informative_messages += traffic.informative
         c.data_items += traffic.data_items
         c.messages_sent += sent.sent
+        c.max_agent_messages = int(self.network.sent_by.max(initial=0))
         c.messages_lost += sent.lost
         c.messages_delayed += sent.delayed
         c.data_items_sent += sent.data_items
@@ -427,7 +428,7 @@ class Protocol:
         """The allocation as it stands: flown paths with start times, groups, validity, score, the run's figures."""
         paths = self.flown_paths
         team = self.score()             # the cached team score over the path table the bids keep timed
-        return Allocation.scored(paths, [self._paths.start[i, path] for i, path in enumerate(paths)], team,
+        return Allocation.scored(self.model, paths, [self._paths.start[i, path] for i, path in enumerate(paths)], team,
                                  counters=dataclasses.replace(self.counters), converged=self.converged,
                                  agreement=self.agreement(), globally_converged=self.globally_converged,
                                  locally_converged=self.locally_converged)
