@@ -150,8 +150,9 @@ def test_episodes_on_the_peers_channels_lose_messages_and_still_agree(channel, p
 
 # -- the per-episode measures -----------------------------------------------------------------------------------------
 def hand_built() -> tuple[ScoringModel, Allocation]:
-    """Agent 0 flies (0,0) → (3,0) → (3,4): 7 km, two valid tasks (both reached before their windows open); agent 1 (10,0) → (10,5): 5 km, one; agent 2 (20,0)
-    → (20,1): 1 km to a task needing two agents, which it holds alone (not valid). γ = 10 per km, rewards 100."""
+    """Agent 0 flies (0,0) → (3,0) → (3,4): 7 km, two valid tasks (both reached before their windows open); agent 1
+    (10,0) → (10,5): 5 km, one; agent 2 (20,0) → (20,1): 1 km to a task needing two agents, which it holds alone (not
+    valid). γ = 10 per km, rewards 100."""
     s = build([agent(0), agent(10), agent(20)],
               [task(3), task(3, 4, start=110), task(10, 5), task(20, 1, agents=2)], arena=(30.0, 30.0, 10.0))
     model = ScoringModel(s)
