@@ -240,3 +240,15 @@ def dropout_schedule(cfg: TaskAllocConfig, n_agents: int, horizon: int,
                               f"bound {horizon}; allowed: 1..{horizon}")
         schedule[round_] = (*schedule.get(round_, ()), agent)
     return schedule
+
+
+def join_schedule(cfg: TaskAllocConfig, horizon: int) -> dict[int, tuple[int, ...]]:
+    """Round → the agents that join at its start (``join_at``). A round past ``horizon`` (the round bound) is an
+    error: that agent could never join."""
+    schedule: dict[int, tuple[int, ...]] = {}
+    for agent, round_ in cfg.join_at or ():
+        if round_ > horizon:
+            raise ConfigError(f"config field 'join_at': agent {agent} joins at round {round_}, past the round bound "
+                              f"{horizon}; allowed: 1..{horizon}")
+        schedule[round_] = (*schedule.get(round_, ()), agent)
+    return schedule

@@ -70,6 +70,13 @@ NETWORK_GROUP = group("network", (
           meaning=('explicit `[[agent, round], …]` failures (instead of `dropouts`; each agent at most once; a round'
                    ' past the round bound is an error)'),
           source='choice'),
+    Field('join_at', 'record', optional=True, default=None,
+          meaning=('late joiners `{agent: round, …}` (or `[[agent, round], …]`): each listed agent is absent from '
+                   '`env.agents` and neither sends nor receives until that round (tick under `acbba`), then enters '
+                   'knowing nothing but what it hears; rounds 1 … the round bound, at least one agent present from '
+                   'the start'),
+          source=('Johnson §2.2 ("agents may enter and leave the network"), ch. 4 goal 4 ("Allow agents to enter '
+                  'and leave the network"); the joining model is ours')),
     Field('silence_timeout', 'int', low=1, optional=True, time_like=True, default=None,
           meaning=('rounds without hearing from or about an agent (its timestamp s_i[k], relayed stamps included) '
                    "after which an agent clears that agent's bids from its table, so its tasks can be re-assigned; "
