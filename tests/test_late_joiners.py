@@ -7,7 +7,7 @@ import re
 
 import numpy as np
 import pytest
-from helpers import episode_digest
+from helpers import agent, build, episode_digest, task
 
 from taskalloc.policies import make_policy, rollout
 from taskalloc.policies.fast import solve as fast_solve
@@ -68,6 +68,18 @@ def test_every_policy_runs_with_late_joiners_and_the_team_agrees(policy, overrid
         assert allocation.counters.invalid_actions == 0
         flown += len(allocation.paths[1]) + len(allocation.paths[3])
     assert flown > 0                                                     # the joiners take part
+
+
+def test_an_acbba_joiner_that_bids_on_nothing_still_learns_every_record():
+    """Agent 2 joins after the others agreed, too far from every task to bid (γ = 10 per km). ACBBA sends only
+    changes, so it learns the records from its neighbours' announcement on its arrival, and the team agrees."""
+    s = build([agent(0), agent(1), agent(9, 9)], [task(0, 1), task(1, 1), task(2, 1)])
+    p = make_policy("acbba")
+    env = TaskAllocEnv(scenario=s, join_at={2: 20}, **p.env_overrides)
+    allocation = rollout(env, p, seed=0)
+    assert allocation.paths[2] == () and all(allocation.members[j] for j in range(3))
+    assert allocation.converged and allocation.agreement
+    assert env.protocol.knowledge.groups.listed()[2].any()
 
 
 def test_a_late_join_holds_the_stop_until_the_joiner_is_in():
