@@ -15,6 +15,9 @@ until the episode ends (D + 1 quiet rounds after the last change; the per-agent 
 match the thesis's Fig 3.11), ``comm_steps_to_agreement`` the same count until the last change, after which every
 agent holds the final solution (the thesis's stop, "when all agents converge to the same conflict-free solution",
 §3.2.3).
+The benchmarks' per-episode measures (``Allocation``): ``completion`` (share of tasks serviced) apart from
+``score_per_task`` (efficiency of what was completed, empty when nothing was), ``workload_gini`` (over serviced tasks
+per agent), ``max_travel`` (the longest flight) and ``max_agent_messages`` (the most messages one agent sent).
 Centralised solvers have no rounds or messages (left empty). Episodes that hit the round bound are kept and
 flagged ``converged = False``.
 """
@@ -51,14 +54,16 @@ METRICS = ("score", "valid_tasks", "conflicts", "rounds", "messages", "comm_step
            "comm_steps_to_agreement", "invalid_actions", "informative_messages", "data_items", "bids", "quits",
            "quits_seen", "messages_lost", "messages_delayed", "data_received_per_agent", "data_sent_per_agent",
            "data_per_assignment", "data_per_agent_per_assignment", "conflicting_bids_per_agent", "dropped_agents",
-           "connected", "fully_connected")
+           "connected", "fully_connected", "completion", "score_per_task", "workload_gini", "max_travel",
+           "max_agent_messages")
 # policies of single-agent tasks only (every L_j = 1): CBBA, ACBBA, CBAA, PI
 SINGLE_AGENT_TASKS = ("cbba", "acbba", "cbaa", "pi")
 SUMMARY_FIELDS = ("score", "valid_tasks", "rounds", "messages")
 PROTOCOL_METRICS = ("rounds", "messages", "comm_steps", "rounds_to_agreement", "comm_steps_to_agreement",
                     "invalid_actions", "informative_messages", "data_items", "quits", "quits_seen", "messages_lost",
                     "messages_delayed", "data_received_per_agent", "data_sent_per_agent", "data_per_assignment",
-                    "data_per_agent_per_assignment", "conflicting_bids_per_agent", "dropped_agents")
+                    "data_per_agent_per_assignment", "conflicting_bids_per_agent", "dropped_agents",
+                    "max_agent_messages")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -34,7 +34,9 @@ METRIC_LABELS = {
     "data_per_agent_per_assignment": "data items / agent / assignment (Σ L_j)",
     "conflicting_bids_per_agent": "conflicting bids / agent",
     "dropped_agents": "failed agents", "connected": "connected network", "fully_connected": "fully connected",
-    "converged": "converged",
+    "converged": "converged", "completion": "share of tasks serviced", "score_per_task": "score / serviced task",
+    "workload_gini": "workload Gini (tasks / agent)", "max_travel": "longest flight",
+    "max_agent_messages": "most messages sent by one agent",
 }
 METRIC_DIGITS = {"score": 0, "valid_tasks": 1, "conflicts": 1, "rounds": 1, "messages": 0, "comm_steps": 1,
                  "informative_messages": 0, "data_items": 0, "bids": 0, "quits": 1, "quits_seen": 1,
@@ -43,7 +45,8 @@ METRIC_DIGITS = {"score": 0, "valid_tasks": 1, "conflicts": 1, "rounds": 1, "mes
                  "data_received_per_agent": 0, "data_sent_per_agent": 0, "data_per_assignment": 0,
                  "data_per_agent_per_assignment": 2,
                  "conflicting_bids_per_agent": 2, "dropped_agents": 2, "connected": 2, "fully_connected": 2,
-                 "converged": 2}
+                 "converged": 2, "completion": 2, "score_per_task": 0, "workload_gini": 2, "max_travel": 1,
+                 "max_agent_messages": 0}
 # yes/no figures: a cell shows the share of its episodes (``62 %``), a plot the share with its 95 % interval
 SHARE_METRICS = ("connected", "fully_connected", "converged")
 

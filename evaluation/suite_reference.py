@@ -23,8 +23,9 @@ from taskalloc_env.errors import ConfigError
 from taskalloc_env.suite import SUITE, TASKS
 
 # the fields of the network's faults (taskalloc_env/options/network.py): the centralised solvers ignore them
-FAULT_FIELDS = ("message_loss", "loss_model", "burst_enter", "burst_leave", "burst_loss", "max_delay", "dropouts",
-                "dropout_rounds", "dropout_schedule", "silence_timeout")
+FAULT_FIELDS = ("message_loss", "loss_model", "burst_enter", "burst_leave", "burst_loss", "burst_correlation",
+                "fading_distance", "fading_exponent", "max_delay", "dropouts", "dropout_rounds", "dropout_schedule",
+                "silence_timeout")
 
 
 def reference_path(suite: str = SUITE) -> Path:

@@ -139,6 +139,7 @@ class AsyncProtocol(Protocol):
         c = self.counters
         c.broadcasts += 1
         c.messages_sent += sent.sent
+        c.max_agent_messages = max(c.max_agent_messages, int(self.network.sent_by[agent]))
         c.messages_lost += sent.lost
         c.messages_delayed += sent.delayed
         c.data_items_sent += sent.data_items
@@ -167,6 +168,7 @@ class AsyncProtocol(Protocol):
         own_before = kn.own_bids() > 0
         bundles_before = [list(b) for b in kn.bundles]
         self._fail(self.dropouts.get(now, ()))
+        self._welcome(self._join_agents(self.joins.get(now, ())))
         self._notice(self.notices.pop(now, ()))
         if self._release_tasks():
             self._news(np.flatnonzero(self.alive))
@@ -260,12 +262,27 @@ class AsyncProtocol(Protocol):
                & (self.round - self.quiet_since > self.cfg.separation_time))
         if not due.any():
             return
-        kn = self.knowledge
-        held = np.where(kn.single[None, :], self.times.task != NEVER, (self.times.entry != NEVER).any(axis=1))
-        self.outgoing[due] |= held[due] & self.released[None, :]
+        self.outgoing[due] |= self._held()[due]
         self.inbox[due] = True
         self.confirmed[due] += 1
         self.quiet_since[due] = self.round
+
+    def _held(self) -> np.ndarray:
+        """(N, M) the released tasks each agent has a record of (what a full announcement carries)."""
+        kn = self.knowledge
+        held = np.where(kn.single[None, :], self.times.task != NEVER, (self.times.entry != NEVER).any(axis=1))
+        return held & self.released[None, :]
+
+    def _welcome(self, joined: list[int]) -> None:
+        """Late joiners enter knowing nothing, and ACBBA rebroadcasts only changes, so each present neighbour of a
+        joiner announces every record it holds (as a confirmation does) and the joiners' builders wake on the tasks
+        they know (our rule: Johnson §2.2 lets agents enter the network but gives no rule for it)."""
+        if not joined:
+            return
+        neighbours = self.live_graph.adjacency[joined].any(axis=0)
+        neighbours[joined] = False
+        self.outgoing[neighbours] |= self._held()[neighbours]
+        self._news(np.union1d(np.flatnonzero(neighbours), joined))
 
     def _schedule_builds(self) -> None:
         """An idle builder with news starts a build; it takes its buffer and is ready ``build_ticks`` later."""
@@ -327,12 +344,12 @@ class AsyncProtocol(Protocol):
 
     # -- convergence -----------------------------------------------------------------------------------------------
     def _events_ahead(self) -> bool:
-        """A release, a failure, a failure notice or a quit timer is still to come."""
+        """A release, a failure, a join, a failure notice or a quit timer is still to come."""
         timers = self.cfg.task_quitting and bool(np.any(self._quittable()
                                                         & (self.round - self.knowledge.assigned_at <= self.cfg.delta)))
         future = any(tick > self.round for tick in self.dropouts)
         owed = bool((self.confirmed[self.alive] < self.cfg.confirmation_count).any())
-        return not self.released.all() or future or bool(self.notices) or timers or owed
+        return not self.released.all() or future or self.joins_ahead or bool(self.notices) or timers or owed
 
     def _check_convergence(self) -> None:
         """Global: quiet network and nothing to come; local: every live agent past its separation time."""

@@ -134,6 +134,8 @@ def _normalise(name: str, value: Any) -> Any:
         return rules.prerequisites(value)
     if name == "dropout_schedule":
         return tuple(tuple(e) if isinstance(e, (list, tuple)) else e for e in rules.as_tuple(name, value))
+    if name == "join_at":
+        return rules.join_pairs(value)
     if kind in ("ints", "names") and (isinstance(value, (list, tuple)) or not FACTS[name].scalar):
         return rules.as_tuple(name, value)
     if kind == "numbers":

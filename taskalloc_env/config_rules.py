@@ -2,8 +2,8 @@
 
 Each field's kind and bounds are checked from its facts first (``check_fields``); the rules here relate fields to
 each other (counts summing to ``n_agents``, a range's upper bound above its lower one, pop-up releases within the
-horizon) and check the records ``task_mix``, ``prerequisites`` and ``dropout_schedule``. Every failure is one
-``ConfigError`` naming the field, its value (bounded) and what is allowed.
+horizon) and check the records ``task_mix``, ``prerequisites``, ``dropout_schedule`` and ``join_at``. Every failure
+is one ``ConfigError`` naming the field, its value (bounded) and what is allowed.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ def check_fields(cfg: Any, facts: Sequence[Field]) -> None:
         field.check(getattr(cfg, field.name))
     _check_generation(cfg)
     _check_network(cfg)
+    _check_joins(cfg)
     _check_popups(cfg)
     _check_asynchronous(cfg)
     _check_generator(cfg)
@@ -110,6 +111,33 @@ def _check_network(cfg: Any) -> None:
         fail("dropout_schedule", schedule, f"fewer failures than n_agents = {cfg.n_agents} (one agent must stay)")
 
 
+def _check_joins(cfg: Any) -> None:
+    """``join_at``: [agent, round] pairs of known agents, each once, rounds 1..the horizon limit, one agent present
+    from the start; a scheduled failure of a joiner comes after its join."""
+    joins = cfg.join_at
+    if joins is None:
+        return
+    allowed = f"{{agent: round}} with agent ids 0..{cfg.n_agents - 1} and rounds 1..{MAX_HORIZON}"
+    if not isinstance(joins, tuple) or not joins:
+        fail("join_at", joins, allowed)
+    for entry in joins:
+        if not (isinstance(entry, tuple) and len(entry) == 2):
+            fail("join_at", joins, allowed)
+        agent, round_ = entry
+        if isinstance(agent, bool) or not isinstance(agent, int) or not 0 <= agent < cfg.n_agents:
+            fail("join_at", agent, f"an agent id 0..{cfg.n_agents - 1} (n_agents = {cfg.n_agents})")
+        _int("join_at", round_, high=MAX_HORIZON)
+    if len({a for a, _ in joins}) != len(joins):
+        fail("join_at", joins, "each agent at most once")
+    if len(joins) >= cfg.n_agents:
+        fail("join_at", joins, f"fewer joiners than n_agents = {cfg.n_agents} (one agent present from the start)")
+    joined = dict(joins)
+    for agent, round_ in cfg.dropout_schedule or ():
+        if agent in joined and round_ <= joined[agent]:
+            fail("dropout_schedule", (agent, round_), f"a failure after agent {agent} joins (join_at round "
+                 f"{joined[agent]})")
+
+
 def _check_popups(cfg: Any) -> None:
     if cfg.popup_tasks > cfg.n_tasks:
         fail("popup_tasks", cfg.popup_tasks, f"at most n_tasks = {cfg.n_tasks}")
@@ -145,6 +173,19 @@ def _check_record(name: str, entry: Any, keys: tuple[str, ...], required: str) -
         fail(f"{name}.{sorted(map(str, unknown))[0]}", entry, f"keys {', '.join(keys)}")
     if required not in entry:
         fail(f"{name}.{required}", entry, f"{required} is required")
+
+
+def join_pairs(value: Any) -> tuple:
+    """``join_at`` as (agent, round) pairs sorted by agent: from a mapping ``{agent: round}`` or a list of pairs."""
+    if isinstance(value, Mapping):
+        pairs = list(value.items())
+    elif isinstance(value, (list, tuple)):
+        pairs = [tuple(e) if isinstance(e, (list, tuple)) else e for e in value]
+    else:
+        fail("join_at", value, "a mapping {agent: round} or a list of [agent, round] pairs")
+    if all(isinstance(p, tuple) and len(p) == 2 and isinstance(p[0], int) for p in pairs):
+        pairs.sort()
+    return tuple(pairs)
 
 
 def as_tuple(name: str, value: Any) -> tuple:

@@ -64,11 +64,11 @@ class StepEngine:
         self._decoded = [decode(action, m) for action in range(n_actions(m, self.release))]   # a lookup beats a call
 
     def waiting(self) -> np.ndarray:
-        """(N,) agents that may only pass: none at the start of a synchronous round; under ``acbba`` every agent whose
-        bundle builder is not ready this tick."""
+        """(N,) agents that may only pass: at the start of a synchronous round only those not present (late joiners
+        before their round); under ``acbba`` every agent whose bundle builder is not ready this tick."""
         if self.asynchronous:
             return ~self.protocol.ready
-        return np.zeros(self.protocol.scenario.n_agents, dtype=bool)
+        return ~self.protocol.alive
 
     def masks(self) -> np.ndarray:
         """(N, 1 + 2M) int8 action masks of every agent now (``action_masks``); (N, 1 + 3M) with ``release_actions``."""
@@ -109,7 +109,7 @@ class StepEngine:
             self.passed = self.waiting()
         elif self.every_step or bool(passed.all()):
             protocol.end_round()
-            passed[:] = ~protocol.alive                     # a failed agent takes no further part
+            passed[:] = ~protocol.alive                     # an agent not present (failed, not joined) passes
 
     def ended(self, max_cycles: int | None = None) -> tuple[bool, bool]:
         """(terminated, truncated): converged; or not, and ``max_cycles`` steps taken, the round bound reached or the

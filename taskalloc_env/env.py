@@ -200,7 +200,7 @@ class TaskAllocEnv(ParallelEnv):
         self._protocol = self._protocol_class(scenario, self.config, rng=protocol_rng)
         self._builder = ObservationBuilder(self._protocol, self._max_agents_per_task, self._max_rounds)
         self._engine = StepEngine(self._protocol)
-        self.agents = list(self.possible_agents)
+        self.agents = [a for a, present in zip(self.possible_agents, self._protocol.alive) if present]  # join_at
         self._last_score = 0.0
         self._done = False
         observations = self._observations()
@@ -220,9 +220,12 @@ class TaskAllocEnv(ParallelEnv):
         protocol.counters.invalid_actions += len(flags)
         self.invalid_action_reasons = flags
         reward, terminated, truncated = self._advance(decisions)
+        alive, index = protocol.alive.tolist(), self.agent_index
+        if self.config.join_at:             # late joiners enter env.agents the step they join, with this step's returns
+            acted = set(self.agents)
+            self.agents = [a for a in self.possible_agents if a in acted or alive[index[a]]]
         agents = list(self.agents)
         observations = self._observations()
-        alive, index = protocol.alive.tolist(), self.agent_index
         rewards = dict.fromkeys(agents, reward)
         terminations = {a: terminated or not alive[index[a]] for a in agents}
         truncations = dict.fromkeys(agents, truncated)

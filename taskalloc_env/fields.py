@@ -56,7 +56,7 @@ class Field:
     """One config field: what it holds (``kind`` with its ``low``/``high`` bounds, ``choices``, sequence
     ``length``), its ``default``, its ``meaning`` and ``source`` (docs/configuration.md) and its ``group``.
     ``time_like`` fields count rounds or ticks and stay within ``MAX_HORIZON``; ``optional`` ones accept None;
-    ``shape`` says what a sequence must look like."""
+    ``shape`` says what a sequence must look like. ``strict``/``strict_high`` exclude the bound itself."""
 
     name: str
     kind: str
@@ -66,6 +66,7 @@ class Field:
     low: float = -math.inf
     high: float = math.inf
     strict: bool = False
+    strict_high: bool = False
     choices: tuple[str, ...] = ()
     optional: bool = False
     length: int | None = None
@@ -110,10 +111,12 @@ class Field:
             ok = isinstance(value, (int, float)) and not isinstance(value, bool)
             ok = ok and (isinstance(value, int) or math.isfinite(value))      # math.isfinite(2**2000) overflows
             if ok:
-                ok = (value > self.low if self.strict else value >= self.low) and abs(value) <= self.high
+                ok = ((value > self.low if self.strict else value >= self.low)
+                      and (value < self.high if self.strict_high else abs(value) <= self.high))
             if not ok:
                 low = "" if self.low == -math.inf else f"{'>' if self.strict else '>='} {self.low:g} and "
-                fail(name, value, f"a number {low}within ±{self.high:g}{self._why()}")
+                high = f"< {self.high:g}" if self.strict_high else f"within ±{self.high:g}{self._why()}"
+                fail(name, value, f"a number {low}{high}")
 
     def _check_sequence(self, value: Any) -> None:
         if self.scalar and not isinstance(value, tuple):

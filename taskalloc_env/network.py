@@ -10,7 +10,9 @@ never need to know how the network behaves. ``Network`` composes the graph with 
 * ``message_loss`` p: each message is lost independently with probability p; ``loss_model="gilbert_elliott"``:
   each link is a two-state channel (Gilbert 1960, Elliott 1963) that enters the bad state with probability
   ``burst_enter`` and leaves it with ``burst_leave`` per round, losing messages with p in the good state and
-  ``burst_loss`` in the bad one, so losses come in bursts;
+  ``burst_loss`` in the bad one, so losses come in bursts; ``"gilbert_elliott_rho"``: the same channel set by its
+  stationary loss rate (``message_loss``) and lag-1 correlation ``burst_correlation``; ``"rayleigh"``: a message
+  arrives with a probability falling with the distance between sender and receiver (``faults`` derives both);
 * ``max_delay`` d: each message arrives after a uniform random number of rounds in 0..d, so rounds overlap and a
   receiver may process an old message after a newer one (the timestamps of thesis (2.4) sort that out).
 
@@ -37,9 +39,18 @@ from scipy.sparse.csgraph import connected_components, shortest_path
 
 from taskalloc_env.config import TaskAllocConfig
 from taskalloc_env.errors import ConfigError
-from taskalloc_env.faults import LOSS_MODELS, GilbertElliott, IndependentLoss, LossModel, NoLoss
+from taskalloc_env.faults import (
+    LOSS_MODELS,
+    GilbertElliott,
+    IndependentLoss,
+    LossModel,
+    NoLoss,
+    RayleighFading,
+    StationaryGilbertElliott,
+)
 
-__all__ = ["GilbertElliott", "IndependentLoss", "LossModel", "NoLoss"]   # the loss models live in faults
+__all__ = ["GilbertElliott", "IndependentLoss", "LossModel", "NoLoss", "RayleighFading",   # the loss models live in
+           "StationaryGilbertElliott"]                                                    # faults
 
 
 class CommGraph:
@@ -47,8 +58,10 @@ class CommGraph:
 
     def __init__(self, positions: np.ndarray, comm_range: float | None = None, edge_rule: str = "dist",
                  alive: np.ndarray | None = None) -> None:
-        """Links between ``positions``; agents not ``alive`` (failed) have none."""
+        """Links between ``positions`` (kept: distance-dependent loss models read them); agents not ``alive``
+        (failed) have none."""
         n = len(positions)
+        self.positions = positions
         if comm_range is None:
             adjacency = ~np.eye(n, dtype=bool)
         else:
@@ -126,7 +139,8 @@ class Sent:
 class Network:
     """Delivers each round's broadcasts over ``graph`` through a loss model and a random delay.
 
-    ``send`` queues the messages of the senders (each to all its neighbours), ``deliver`` hands out those due.
+    ``send`` queues the messages of the senders (each to all its neighbours), ``deliver`` hands out those due;
+    ``sent_by`` counts the messages each agent has sent (one per neighbour per broadcast, lost ones included).
     """
 
     def __init__(self, graph: CommGraph, loss: LossModel | None = None, max_delay: int = 0,
@@ -137,6 +151,7 @@ class Network:
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self._queue = (_NOTHING,) * 4                         # receiver, sender, sent, due
         self._link_cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+        self.sent_by = np.zeros(graph.n_agents, dtype=np.int64)
 
     @property
     def perfect(self) -> bool:
@@ -145,6 +160,7 @@ class Network:
     def send(self, now: int, senders: np.ndarray, items: np.ndarray) -> Sent:
         """Every agent of ``senders`` broadcasts to its neighbours; ``items`` (N,) the data items of each message."""
         sender, receiver = self._links(senders)
+        self.sent_by[senders] += self.graph.degree[senders]
         if self.perfect:                    # nothing is lost or delayed, and nothing is drawn
             stamp = np.full(len(sender), now)
             queued, lost, delayed = (receiver, sender, stamp, stamp), 0, 0
@@ -196,8 +212,9 @@ class Network:
 
 
 def make_network(graph: CommGraph, cfg: TaskAllocConfig, rng: np.random.Generator) -> Network:
-    """The ``Network`` the config names (``message_loss``, ``loss_model``, ``burst_*``, ``max_delay``)."""
-    loss = LOSS_MODELS[cfg.loss_model].from_config(cfg, graph.n_agents)
+    """The ``Network`` the config names (``message_loss``, ``loss_model`` with its ``burst_*`` or ``fading_*``
+    fields, ``max_delay``); the loss model is set up for the agents at the graph's positions."""
+    loss = LOSS_MODELS[cfg.loss_model].from_config(cfg, graph.positions)
     return Network(graph, loss, cfg.max_delay, rng)
 
 
@@ -221,5 +238,17 @@ def dropout_schedule(cfg: TaskAllocConfig, n_agents: int, horizon: int,
         if round_ > horizon:
             raise ConfigError(f"config field 'dropout_schedule'/'dropout_rounds': round {round_} is past the round "
                               f"bound {horizon}; allowed: 1..{horizon}")
+        schedule[round_] = (*schedule.get(round_, ()), agent)
+    return schedule
+
+
+def join_schedule(cfg: TaskAllocConfig, horizon: int) -> dict[int, tuple[int, ...]]:
+    """Round → the agents that join at its start (``join_at``). A round past ``horizon`` (the round bound) is an
+    error: that agent could never join."""
+    schedule: dict[int, tuple[int, ...]] = {}
+    for agent, round_ in cfg.join_at or ():
+        if round_ > horizon:
+            raise ConfigError(f"config field 'join_at': agent {agent} joins at round {round_}, past the round bound "
+                              f"{horizon}; allowed: 1..{horizon}")
         schedule[round_] = (*schedule.get(round_, ()), agent)
     return schedule

@@ -12,6 +12,11 @@ phase (thesis §3.2.3 and §5.2.2):
 Pop-up tasks (``releases``, any consensus mode): a task is invisible, and cannot be bid on, before its release
 round; a release counts as a change, and the run has not converged while a release is still to come.
 
+Late joiners (``join_at``, any consensus mode; ours): an agent that joins at round r is absent before it -- not
+``alive``, so it neither sends nor receives, and its empty table is the knowledge it starts with -- and present from
+round r's exchange on, where it hears its neighbours. A join counts as a change, and the run has not converged while
+a join is still to come. An agent that fails before its join round never joins.
+
 Task quitting is part of the protocol when ``task_quitting`` is on (thesis §5.2.2, Alg 9): agent i may quit j
 only if L_j > 1, i is a member, it never quit j (Q_i[j] = 0), the group is incomplete in its view and the
 group-synchronised timer has run out (T − H_i[j] > δ, ``delta``). Which bids and quits to make is the policy's
@@ -33,7 +38,7 @@ from taskalloc_env.consensus import Snapshot, Traffic, exchange, snapshot
 from taskalloc_env.group_table import GroupTable
 from taskalloc_env.kernels.quits import quittable
 from taskalloc_env.knowledge import LocalKnowledge
-from taskalloc_env.network import CommGraph, dropout_schedule, make_network
+from taskalloc_env.network import CommGraph, dropout_schedule, join_schedule, make_network
 from taskalloc_env.releases import release_ticks
 from taskalloc_env.scenario import Scenario
 from taskalloc_env.scoring import PathTable, Schedule, ScoringModel, TeamScore, team_score
@@ -75,8 +80,11 @@ class Protocol:
         self.released = self.release_tick <= 0
         self.counters = Counters()
         self.network = make_network(self.graph, self.cfg, self.rng)
-        self.alive = np.ones(s.n_agents, dtype=bool)
-        self.live_graph = self.graph
+        self.joins = join_schedule(self.cfg, self.max_rounds)
+        self.to_join = np.zeros(s.n_agents, dtype=bool)           # late joiners not present yet
+        self.to_join[[a for agents in self.joins.values() for a in agents]] = True
+        self.alive = ~self.to_join                                # present: joined and not failed
+        self.live_graph = self.graph if self.alive.all() else self._graph_of_present()
         self.dropouts = dropout_schedule(self.cfg, s.n_agents, self.max_rounds, self.rng)
         self.last_heard = np.zeros((s.n_agents, s.n_agents), dtype=np.int64)   # latest send round i received from k
         self._snapshots: dict[int, Snapshot] = {}
@@ -271,7 +279,7 @@ class Protocol:
         kn = self.knowledge
         self.round += 1
         self._fail_agents(self.dropouts.get(self.round, ()))
-        appeared = self._release_tasks()
+        appeared = bool(self._join_agents(self.joins.get(self.round, ()))) | self._release_tasks()
         own_before = kn.groups.own > 0
         snap = snapshot(kn, self.round)
         self._snapshots[self.round] = snap
@@ -301,6 +309,7 @@ class Protocol:
         c.informative_messages += traffic.informative
         c.data_items += traffic.data_items
         c.messages_sent += sent.sent
+        c.max_agent_messages = int(self.network.sent_by.max(initial=0))
         c.messages_lost += sent.lost
         c.messages_delayed += sent.delayed
         c.data_items_sent += sent.data_items
@@ -310,7 +319,8 @@ class Protocol:
         self._last_groups = kn.groups.copy()
         self._last_bundles = [list(b) for b in kn.bundles]
         self.stable_rounds = 0 if changed or self._quit_pending(counts) else self.stable_rounds + 1
-        stable = self.stable_rounds >= self.live_graph.diameter + 1 and bool(self.released.all())
+        stable = (self.stable_rounds >= self.live_graph.diameter + 1 and bool(self.released.all())
+                  and not self.joins_ahead)
         if stable and not self._settled():
             self.converged = False
             self.unresolved = ("no table changed for D + 1 rounds, but an agent has not received a message its "
@@ -392,13 +402,34 @@ class Protocol:
         return bool(heard) and not counts_on_failed and not np.any(self.network.in_flight() <= last_change)
 
     def _fail_agents(self, agents: tuple[int, ...]) -> None:
-        """Agents that fail this round stop sending and receiving; their paths are no longer flown."""
+        """Agents that fail this round stop sending and receiving; their paths are no longer flown. A late joiner
+        that fails before it joins never joins."""
         if not agents:
             return
         self.alive[list(agents)] = False
-        self.live_graph = CommGraph(self.scenario.agent_pos, self.cfg.comm_range, self.cfg.edge_rule, self.alive)
+        self.to_join[list(agents)] = False
+        self.live_graph = self._graph_of_present()
         self.counters.dropped_agents += len(agents)
         self._touch()
+
+    def _join_agents(self, agents: tuple[int, ...]) -> list[int]:
+        """Late joiners due this round enter: from now on they send and receive (``join_at``). Returns them."""
+        joining = [a for a in agents if self.to_join[a]]
+        if joining:
+            self.to_join[joining] = False
+            self.alive[joining] = True
+            self.live_graph = self._graph_of_present()
+            self._touch()
+        return joining
+
+    @property
+    def joins_ahead(self) -> bool:
+        """A late joiner is still to come."""
+        return bool(self.to_join.any())
+
+    def _graph_of_present(self) -> CommGraph:
+        """The links between the agents present now (joined and not failed)."""
+        return CommGraph(self.scenario.agent_pos, self.cfg.comm_range, self.cfg.edge_rule, self.alive)
 
     def _forget_silent(self) -> None:
         """A live agent that has heard nothing from or about k for ``silence_timeout`` rounds (its timestamp s_i[k],
@@ -450,7 +481,7 @@ class Protocol:
         """The allocation as it stands: flown paths with start times, groups, validity, score, the run's figures."""
         paths = self.flown_paths
         team = self.score()             # the cached team score over the path table the bids keep timed
-        return Allocation.scored(paths, [self._paths.start[i, path] for i, path in enumerate(paths)], team,
+        return Allocation.scored(self.model, paths, [self._paths.start[i, path] for i, path in enumerate(paths)], team,
                                  counters=dataclasses.replace(self.counters), converged=self.converged,
                                  agreement=self.agreement(), globally_converged=self.globally_converged,
                                  locally_converged=self.locally_converged)

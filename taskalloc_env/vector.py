@@ -30,8 +30,9 @@ Autoreset (``autoreset_mode``):
   restarts the instances where the (K,) boolean ``m`` is set and leaves the others as they are; stepping an ended
   instance is an error.
 
-Supported: every option of the single env except agent drop-outs (``dropouts``, ``dropout_schedule``: a failed
-agent leaves ``env.agents``, which a fixed (K, N) layout cannot express) and rendering. Today each instance is
+Supported: every option of the single env except agent drop-outs and late joiners (``dropouts``,
+``dropout_schedule``, ``join_at``: a failed agent leaves ``env.agents`` and a joiner enters it, which a fixed (K, N)
+layout cannot express) and rendering. Today each instance is
 stepped in turn by the single env's engine; ``docs/benchmarks.md`` gives the throughput this reaches.
 """
 
@@ -58,7 +59,7 @@ AUTORESET_MODES = ("next_step", "same_step", "disabled")
 # the figures of every instance after each step, arrays of length K (``TaskAllocEnv._figures`` per instance)
 INFO_KEYS = {"score": np.float64, "valid_tasks": np.int64, "conflicts": np.int64, "round": np.int64,
              "messages": np.int64, "data_items": np.int64, "converged": np.bool_}
-UNSUPPORTED = {"dropouts": 0, "dropout_schedule": None}      # field -> the only value the batch takes
+UNSUPPORTED = {"dropouts": 0, "dropout_schedule": None, "join_at": None}    # field -> the only value the batch takes
 MAX_NUM_ENVS = 1_000_000
 
 
@@ -88,7 +89,8 @@ class TaskAllocVectorEnv:
         for field, allowed in UNSUPPORTED.items():
             if getattr(cfg, field) != allowed:
                 raise ConfigError(f"{field}={getattr(cfg, field)!r}: the batched env keeps every agent for the whole "
-                                  f"episode (a failed agent would leave env.agents); only {allowed!r} is supported")
+                                  f"episode (a failed agent would leave env.agents, a late joiner enter it); only "
+                                  f"{allowed!r} is supported")
         k = int(num_envs)
         self._check_memory(k, template, memory_limit_gb)
         self.num_envs = k

@@ -52,6 +52,9 @@ CONFIGS = {
     "acbba_popups": {"n_agents": 4, "n_tasks": 6, "agents_per_task": [1, 2], "consensus": "acbba", "popup_tasks": 3,
                      "popup_period": 8, "popup_arrivals": "poisson", "message_loss": 0.1, "max_delay": 1,
                      "task_quitting": True},
+    # late joiners enter env.agents mid-episode (join_at), synchronous and asynchronous
+    "late_joiners": {"n_agents": 4, "n_tasks": 5, "agents_per_task": [1, 2], "join_at": {1: 2, 3: 4}},
+    "acbba_joiners": {"n_agents": 4, "n_tasks": 5, "agents_per_task": 1, "consensus": "acbba", "join_at": {0: 3}},
 }
 CONFIG_IDS = list(CONFIGS)
 

@@ -95,6 +95,8 @@ def test_deliveries_sort_old_messages_first():
 FAULTS = {
     "loss": {"message_loss": 0.2},
     "bursts": {"loss_model": "gilbert_elliott", "message_loss": 0.02, "burst_enter": 0.1, "burst_leave": 0.4},
+    "bursts-rho": {"loss_model": "gilbert_elliott_rho", "message_loss": 0.2, "burst_correlation": 0.8},
+    "rayleigh": {"loss_model": "rayleigh"},
     "delay": {"max_delay": 2},
     "loss+delay": {"message_loss": 0.2, "max_delay": 2},
     "range+loss": {"comm_range": 2.5, "message_loss": 0.2},

@@ -2,9 +2,10 @@
 
 The equality property drives K single envs and the batch with the same joint actions, chosen by a policy from the
 single envs' own observations (random masked, CBGABI, a committed learned policy; now and then an action outside the
-mask), over random scenarios and options (both synchronous consensus modes and the asynchronous one, perfect, lossy,
-bursty and delayed links, pop-up tasks), across autoresets, and compares observations, masks, rewards, flags, infos,
-states and the final allocations byte for byte. Then the autoreset modes, seeding and bad input.
+mask), over random scenarios and options (both synchronous consensus modes and the asynchronous one; perfect, lossy,
+bursty, fading and delayed links; pop-up tasks; release actions), across autoresets, and compares observations,
+masks, rewards, flags, infos, states and the final allocations byte for byte. Then the autoreset modes, seeding and
+bad input.
 """
 
 from __future__ import annotations
@@ -28,11 +29,15 @@ K = 3
 @st.composite
 def batch_options(draw) -> dict:
     kw = draw(scenario_config(small=True))
-    network = draw(st.sampled_from(["perfect", "lossy", "bursty", "delay", "range"]))
+    network = draw(st.sampled_from(["perfect", "lossy", "bursty", "correlated", "fading", "delay", "range"]))
     if network == "lossy":
         kw["message_loss"] = draw(st.sampled_from([0.1, 0.4]))
     elif network == "bursty":
         kw["loss_model"] = "gilbert_elliott"
+    elif network == "correlated":
+        kw.update(loss_model="gilbert_elliott_rho", message_loss=0.3)
+    elif network == "fading":
+        kw["loss_model"] = "rayleigh"
     elif network == "delay":
         kw["max_delay"] = draw(st.integers(1, 2))
     elif network == "range":
@@ -41,6 +46,8 @@ def batch_options(draw) -> dict:
         kw["consensus"] = "acbba"
     if draw(st.integers(0, 4)) == 0 and kw["n_tasks"] >= 3:
         kw["popup_tasks"] = 1
+    if draw(st.integers(0, 4)) == 0:
+        kw["release_actions"] = True
     return kw
 
 
@@ -251,7 +258,8 @@ def test_too_large_for_memory_is_refused_with_the_estimate():
         taskalloc_env.vector_env(100_000, scenario="default", memory_limit_gb=1.0)
 
 
-@pytest.mark.parametrize("option", [{"dropouts": 1}, {"dropout_schedule": [[0, 2]]}, {"render_mode": "ansi"},
+@pytest.mark.parametrize("option", [{"dropouts": 1}, {"dropout_schedule": [[0, 2]]}, {"join_at": {1: 2}},
+                                    {"render_mode": "ansi"},
                                     {"autoreset_mode": "never"}])
 def test_unsupported_options_are_named(option):
     with pytest.raises(ConfigError, match=next(iter(option))):
