@@ -16,7 +16,7 @@ from typing import Any
 
 from taskalloc_env import stamps
 from taskalloc_env.fields import MAX_COUNT, MAX_HORIZON, Field, fail
-from taskalloc_env.generators import GENERATORS
+from taskalloc_env.generators import CHECKS, GENERATORS
 from taskalloc_env.options.generation import PrerequisiteChains, TaskMix
 
 
@@ -161,6 +161,8 @@ def _check_generator(cfg: Any) -> None:
     if cfg.generator not in GENERATORS:
         fail("generator", cfg.generator, f"a registered generator: {' | '.join(GENERATORS)} "
              "(register_generator adds one)")
+    if cfg.generator in CHECKS:                     # the fields this family cannot honour (generators.CHECKS)
+        CHECKS[cfg.generator](cfg)
 
 
 # -- the nested records, from YAML mappings -----------------------------------------------------------------------

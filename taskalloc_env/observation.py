@@ -211,7 +211,9 @@ class ObservationBuilder:
         f[:, :, col("window_start")], f[:, :, col("window_end")] = self.scales.window(s)
         rel = (s.task_pos[None, :, :] - s.agent_pos[:, None, :]) / self.scales.arena
         f[:, :, col("dx")], f[:, :, col("dy")], f[:, :, col("dz")] = rel[..., 0], rel[..., 1], rel[..., 2]
-        f[:, :, col("distance")] = protocol.model.dist_agent_task / self.scales.diagonal
+        # ≤ 2 under euclidean travel (the bound never binds); under manhattan it can exceed 2 only for positions
+        # beyond the arena's [0, size] box, and is then held at the space's bound
+        f[:, :, col("distance")] = np.minimum(protocol.model.dist_agent_task / self.scales.diagonal, RELATIVE_BOUND)
         f[:, :, col("equipment_match")] = protocol.equipment_match
         if "sooner_agents" in self.layout.task_names:
             f[:, :, col("sooner_agents")], f[:, :, col("nearest_other")] = self._team_features(protocol)

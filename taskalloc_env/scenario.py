@@ -22,7 +22,7 @@ import numpy as np
 
 from taskalloc_env.config import MAX_MAGNITUDE, TaskAllocConfig, type_counts
 from taskalloc_env.errors import ConfigError
-from taskalloc_env.fields import bounded_repr
+from taskalloc_env.fields import bounded_repr, fail
 from taskalloc_env.generators import GENERATORS, register_generator
 
 NO_DEADLINE = np.inf
@@ -358,10 +358,8 @@ def uniform(cfg: TaskAllocConfig, rng: np.random.Generator) -> Scenario:
                 for item in mix.equipment:
                     task_eq[j, names.index(item)] += 1
                 j += 1
-    elif isinstance(cfg.agents_per_task, tuple):
-        agents = rng.choice(np.array(cfg.agents_per_task, dtype=np.int64), size=m)
     else:
-        agents = np.full(m, cfg.agents_per_task, dtype=np.int64)
+        agents = required_agents(cfg, rng, m)
     prereqs = np.zeros((m, m), dtype=bool)
     if cfg.prerequisites:
         chains = cfg.prerequisites
@@ -380,4 +378,83 @@ def uniform(cfg: TaskAllocConfig, rng: np.random.Generator) -> Scenario:
     )
 
 
-register_generator("uniform", uniform)
+def required_agents(cfg: TaskAllocConfig, rng: np.random.Generator, m: int) -> np.ndarray:
+    """(m,) L_j from ``agents_per_task``: the one value, or drawn uniformly per task from its list."""
+    if isinstance(cfg.agents_per_task, tuple):
+        return rng.choice(np.array(cfg.agents_per_task, dtype=np.int64), size=m)
+    return np.full(m, cfg.agents_per_task, dtype=np.int64)
+
+
+def _check_uniform(cfg: TaskAllocConfig) -> None:
+    if cfg.grid:
+        fail("grid", cfg.grid, "false with generator uniform (grid cells are the visit generator's)")
+
+
+def visit_starts(cfg: TaskAllocConfig) -> np.ndarray:
+    """(N, 3) the visit agents' starts: evenly along the floor's edge x = 0, from y = 0 to y = depth (one agent: the
+    edge's middle), each on the nearest integer cell under ``grid`` (the DCTA benchmark's ``edge_even`` layout:
+    4 robots at y = 0, 6, 12, 18 of a 19 × 19 grid)."""
+    n, depth = cfg.n_agents, cfg.arena[1]
+    y = depth * np.arange(n) / (n - 1) if n > 1 else np.array([depth / 2])
+    if cfg.grid:
+        y = np.round(y)
+    return np.column_stack([np.zeros(n), y, np.zeros(n)])
+
+
+def _grid_cells(cfg: TaskAllocConfig) -> np.ndarray:
+    """(C, 2) the floor's integer cells (x, y) that are no agent's start, in row-major order."""
+    width, depth = (int(np.floor(v)) for v in cfg.arena[:2])
+    x, y = np.meshgrid(np.arange(width + 1), np.arange(depth + 1), indexing="ij")
+    cells = np.column_stack([x.ravel(), y.ravel()]).astype(float)
+    taken = (cells[:, None, :] == visit_starts(cfg)[None, :, :2]).all(axis=2).any(axis=1)
+    return cells[~taken]
+
+
+def _check_visit(cfg: TaskAllocConfig) -> None:
+    """What ``visit`` cannot honour: equipment, task mixes and prerequisites (it draws none), and more agents or
+    targets than the grid has cells for."""
+    for name in ("agent_types", "agent_type_counts", "task_mix", "prerequisites"):
+        if getattr(cfg, name) is not None:
+            fail(name, getattr(cfg, name), "null with generator visit (its targets need no equipment or order)")
+    if not cfg.grid:
+        return
+    edge = int(np.floor(cfg.arena[1])) + 1
+    if cfg.n_agents > edge:
+        fail("n_agents", cfg.n_agents, f"at most {edge} with generator visit and grid: one cell each along the "
+             f"edge of depth {cfg.arena[1]:g}")
+    free = (int(np.floor(cfg.arena[0])) + 1) * edge - cfg.n_agents
+    if cfg.n_tasks > free:
+        fail("n_tasks", cfg.n_tasks, f"at most {free} with generator visit and grid: the cells of the "
+             f"{cfg.arena[0]:g} × {cfg.arena[1]:g} floor that are no agent's start")
+
+
+def visit(cfg: TaskAllocConfig, rng: np.random.Generator) -> Scenario:
+    """Draw a collaborative-visit instance (ours, after Nayak et al., IEEE RA-L 2020, "Collaborative visit": agents
+    visit known stationary targets; and the DCTA benchmark's 19 × 19 grid with 4 robots on its left edge and 10
+    targets on distinct cells, none on a start).
+
+    Agents start on the floor's edge x = 0 (``visit_starts``); the ``n_tasks`` targets lie on the floor (z = 0),
+    uniformly, or on distinct integer cells under ``grid``; every target is known from the start, open from time 0
+    and never closes (``start_time_range`` and ``window`` are not used), with reward c̄ and L_j from
+    ``agents_per_task`` (1 in ``configs/scenarios/visit.yaml``).
+    """
+    n, m = cfg.n_agents, cfg.n_tasks
+    agent_pos = visit_starts(cfg)
+    if cfg.grid:
+        cells = _grid_cells(cfg)
+        floor = cells[rng.choice(len(cells), size=m, replace=False)]
+    else:
+        floor = rng.uniform((0.0, 0.0), cfg.arena[:2], size=(m, 2))
+    task_pos = np.column_stack([floor, np.zeros(m)])
+    return Scenario(
+        agent_pos=agent_pos, agent_speed=np.full(n, cfg.speed_internal), agent_equipment=np.zeros((n, 0), dtype=bool),
+        task_pos=task_pos, task_reward=np.full(m, cfg.reward), task_start=np.zeros(m),
+        task_end=np.full(m, NO_DEADLINE), task_duration=np.full(m, cfg.duration),
+        task_agents=required_agents(cfg, rng, m), task_equipment=np.zeros((m, 0), dtype=np.int64),
+        task_prereqs=np.zeros((m, m), dtype=bool), time_discount=cfg.time_discount,
+        distance_discount=cfg.distance_discount, arena=cfg.arena,
+    )
+
+
+register_generator("uniform", uniform, _check_uniform)
+register_generator("visit", visit, _check_visit)

@@ -64,9 +64,11 @@ class ScoringModel:
     def __init__(self, scenario: Scenario, *, distance_cost: str = TaskAllocConfig.distance_cost,
                  prereq_timing: str = TaskAllocConfig.prereq_timing, reward_split: str = TaskAllocConfig.reward_split,
                  marginal_gain: str = TaskAllocConfig.marginal_gain,
-                 reward_time: str = TaskAllocConfig.reward_time, release: np.ndarray | None = None) -> None:
+                 reward_time: str = TaskAllocConfig.reward_time, travel_metric: str = TaskAllocConfig.travel_metric,
+                 release: np.ndarray | None = None) -> None:
         """Scoring options default to the config's defaults (``TaskAllocConfig``), their one home. ``release`` (M,)
-        is the mission time at which each task becomes known (None: all at time 0)."""
+        is the mission time at which each task becomes known (None: all at time 0). ``travel_metric`` is the distance
+        flown (``distances``): every travel time, cost and flight length derives from the two matrices below."""
         self.scenario = scenario
         self.distance_cost = distance_cost
         self.marginal_gain = marginal_gain
@@ -75,8 +77,8 @@ class ScoringModel:
         self.lam = float(s.time_discount)
         self.gamma = float(s.distance_discount)
         self.speed = s.agent_speed.astype(float)
-        self.dist_agent_task = distances(s.agent_pos, s.task_pos)
-        self.dist_task_task = distances(s.task_pos, s.task_pos)
+        self.dist_agent_task = distances(s.agent_pos, s.task_pos, travel_metric)
+        self.dist_task_task = distances(s.task_pos, s.task_pos, travel_metric)
         self.pay = s.task_reward / s.task_agents if reward_split == "total" else s.task_reward.astype(float)
         self.ready = self._prerequisite_ready(prereq_timing)
         self.earliest = np.maximum(s.task_start, self.ready)
@@ -110,7 +112,7 @@ class ScoringModel:
             mission = np.where(release > 0, release * cfg.mission_time_per_tick, -np.inf)
         return cls(scenario, distance_cost=cfg.distance_cost, prereq_timing=cfg.prereq_timing,
                    reward_split=cfg.reward_split, marginal_gain=cfg.marginal_gain, reward_time=cfg.reward_time,
-                   release=mission)
+                   travel_metric=cfg.travel_metric, release=mission)
 
     # -- paths and marginal gains, batched over agents ---------------------------------------------------------
     def schedule(self, agent: int, path: Sequence[int]) -> Schedule:
@@ -278,11 +280,14 @@ class ScoringModel:
         return fits, loss
 
 
-def distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(len(a), len(b)) Euclidean distances between 3-D points: ``np.linalg.norm(a[:, None] - b[None], axis=2)``
-    summed in the same order ((dx² + dy²) + dz²), so the same bits, without numpy's slow reduction over an axis
-    of length 3 (a quarter of a millisecond at 100 tasks, once per episode)."""
+def distances(a: np.ndarray, b: np.ndarray, metric: str = "euclidean") -> np.ndarray:
+    """(len(a), len(b)) distances between 3-D points. ``euclidean`` (thesis (3.8)–(3.9)'s ‖·‖):
+    ``np.linalg.norm(a[:, None] - b[None], axis=2)`` summed in the same order ((dx² + dy²) + dz²), so the same bits,
+    without numpy's slow reduction over an axis of length 3 (a quarter of a millisecond at 100 tasks, once per
+    episode); ``manhattan`` (``travel_metric``, ours): |dx| + |dy| + |dz|, the moves of a grid walk."""
     dx, dy, dz = (np.subtract.outer(a[:, c], b[:, c]) for c in range(3))
+    if metric == "manhattan":
+        return (np.abs(dx) + np.abs(dy)) + np.abs(dz)
     return np.sqrt((dx * dx + dy * dy) + dz * dz)
 
 

@@ -92,6 +92,15 @@ GENERATION_GROUP = group("generation", (
           source='thesis §3.1.3, (3.6); E3.15'),
     Field('generator', 'name', default='uniform',
           meaning=('the scenario generator, by its name in `generators.GENERATORS` (`register_generator(name, fn)` '
-                   'adds one): `uniform` draws positions, start times and L_j uniformly (below)'),
-          source='`uniform`: thesis §3.3.2 (the distribution is ours); the registry is ours'),
+                   'adds one): `uniform` draws positions, start times and L_j uniformly (below) \\| `visit`: the '
+                   'collaborative visit, `n_agents` evenly along the floor\'s edge x = 0, `n_tasks` known targets '
+                   'on the floor, open from time 0 with no deadline (`start_time_range`, `window` unused; no '
+                   'equipment or prerequisites)'),
+          source=('`uniform`: thesis §3.3.2 (the distribution is ours); `visit`: ours, after the collaborative visit '
+                  'of Nayak et al., IEEE RA-L 2020, and the DCTA benchmark (4 robots on one edge, 10 targets); the '
+                  'registry is ours')),
+    Field('grid', 'bool', default=False,
+          meaning=('`visit` only: agents and targets on integer cells of the floor, the targets on distinct cells '
+                   'none of which is an agent\'s start (the DCTA benchmark\'s 19 × 19 grid is `arena: [18, 18, 1]`)'),
+          source='ours, after the DCTA benchmark\'s grid'),
 ))

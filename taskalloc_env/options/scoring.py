@@ -23,6 +23,10 @@ SCORING_GROUP = group("scoring", (
     Field('reward_split', 'choice', choices=('per_agent', 'total'), default='per_agent',
           meaning='every member earns c̄_j \\| `total` (c̄_j / L_j each, E3.7)',
           source='thesis §3.2.2; §3.3.3 (E3.7: 150 per task in total)'),
+    Field('travel_metric', 'choice', choices=('euclidean', 'manhattan'), default='euclidean',
+          meaning=('the distance agents fly, for travel times, costs and `max_travel`: `euclidean` (‖·‖, straight '
+                   'flight) \\| `manhattan` (Σ \\|Δ\\| over the axes: moves along a grid, one unit per cell)'),
+          source='thesis (3.8)–(3.9) (‖·‖); `manhattan`: ours, for the DCTA benchmark\'s grid moves'),
     Field('conflict_policy', 'choice', choices=('first_L_paid', 'none_paid'), default='first_L_paid',
           meaning='more than L_j members: the first L_j starters are paid \\| `none_paid`',
           source='choice (conflicts: thesis §4.3)'),
