@@ -107,8 +107,9 @@ def episode(args: tuple[str, dict[str, Any], int]) -> dict[str, Any]:
 
 class _LocalWatch:
     """Per tick of an asynchronous episode: the agents declared locally converged at the ticks with broadcasts (from
-    the first pop-up on, when there are pop-ups), and the agents whose bundle changed between two pop-up releases,
-    at any tick (bidders) and for good (net)."""
+    the first pop-up on, when there are pop-ups); the agents whose bundle changed between two pop-up releases, at any
+    tick (bidders) and for good (net); declarations, and those broken: the agent's bundle changed afterwards with no
+    pop-up released in between (a premature declaration)."""
 
     def __init__(self, env: TaskAllocEnv) -> None:
         self.p = env.protocol
@@ -120,6 +121,8 @@ class _LocalWatch:
         self.moved: set[int] = set()
         self.bidders: list[int] = []
         self.net: list[int] = []
+        self.armed = np.zeros(len(self.bundles), dtype=bool)   # declared since the last pop-up and bundle change
+        self.declarations = self.broken = 0
 
     def _bundles(self) -> list[tuple[int, ...]]:
         return [tuple(b) for b in self.p.knowledge.bundles]
@@ -138,7 +141,14 @@ class _LocalWatch:
         now = self._bundles()
         if p.round in self.releases:                   # a pop-up: close the interval of the previous one
             self._close(now)
-        self.moved |= {a for a, (b, c) in enumerate(zip(self.bundles, now)) if b != c}
+            self.armed[:] = False                      # new information: a declaration may end
+        changed = np.array([b != c for b, c in zip(self.bundles, now)])
+        self.broken += int((changed & self.armed).sum())           # declared, then the bundle changed
+        self.armed &= ~changed
+        declared = p.agents_locally_converged
+        self.declarations += int((declared & ~self.armed).sum())
+        self.armed |= declared
+        self.moved |= set(np.flatnonzero(changed).tolist())
         self.bundles = now
 
     def _close(self, now: list[tuple[int, ...]]) -> None:
@@ -151,7 +161,8 @@ class _LocalWatch:
         if self.releases:
             self._close(self._bundles())
         return {"traffic": self.traffic, "declared_traffic": self.declared_traffic,
-                "declared_agents": self.declared_agents, "declared_series": self.series,
+                "declared_agents": self.declared_agents, "declarations": self.declarations, "broken": self.broken,
+                "declared_series": self.series,
                 "popup_bidders": self.bidders, "popup_net": self.net}
 
 
@@ -245,11 +256,13 @@ def _local_table(rows: list[dict[str, Any]], runs: list[tuple[str, str]]) -> str
                      mean_sd([n for r in cell for n in r["popup_bidders"]], 1),
                      mean_sd([n for r in cell for n in r["popup_net"]], 1), str(traffic),
                      f"{declared} ({100 * declared / max(traffic, 1):.1f} %)",
-                     f"{sum(r['declared_agents'] for r in cell) / max(traffic, 1):.2f}"])
+                     f"{sum(r['declared_agents'] for r in cell) / max(traffic, 1):.2f}",
+                     f"{sum(r['broken'] for r in cell)} of {sum(r['declarations'] for r in cell)}"])
     return markdown_table(["pop-ups (8 agents, L = 5, 35 tasks)", "local_convergence", "agents broadcasting per "
                            "pop-up", "agents bidding per pop-up", "bundles changed for good per pop-up",
                            "ticks with broadcasts from the first pop-up", "… with an agent locally converged",
-                           "agents converged at those ticks (mean)"], body)
+                           "agents converged at those ticks (mean)",
+                           "declarations broken by a bundle change before the next pop-up"], body)
 
 
 def _plot_profiles(rows: list[dict[str, Any]], out: Path) -> None:
