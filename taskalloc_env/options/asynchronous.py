@@ -18,7 +18,8 @@ ASYNC_GROUP = group("asynchronous", (
                    'uniform integer draw'),
           source='Johnson §4.1.1 (throttled builder); values choice'),
     Field('separation_time', 'int', low=1, time_like=True, default=25,
-          meaning='ticks without relevant information after which an agent counts as locally converged',
+          meaning=('ticks of its separation clock (`local_convergence`) after which an agent counts as locally '
+                   'converged'),
           source='Johnson §4.1.3 (separation time); value measured ([decisions](decisions.md))'),
     Field('local_convergence', 'choice', choices=('bundle', 'table'), default='bundle',
           meaning=("what an agent's local-convergence declaration waits on: its bundle and the records of the tasks "
