@@ -15,15 +15,20 @@ arrival period to burst length instead, a release every 5 ms); the pop-up runs r
 pop-ups); the task field is the repository's default scenario with single-agent tasks and DMG scores
 (``marginal_gain="frozen"``, ``distance_cost="from_start"``; Johnson's scoring is CBBA's, line 908). Every run uses
 the scripted ``acbba`` policy and ends when the network is quiet (``termination="global"``), so that the whole
-profile is recorded.
+profile is recorded. ``profiles`` also measures local convergence while the pop-ups are negotiated ("certain agents
+can be in a converged state even though others are still actively engaging in a consensus phase", line 939): per
+pop-up the agents that broadcast, that bid and whose bundle changed for good, and the ticks with broadcasts at which
+some agent had declared itself converged, under each ``local_convergence`` (``CLOCKS``; the broadcasts are the same
+under both, only the declarations move).
 
 Each command prints markdown tables (pasted into docs/results.md) and writes them, the per-run CSV and the PNGs to
 ``--out`` (default ``results/acbba``).
 
 Where the settings live: in this module, not in ``configs/experiments/``. ``JOHNSON`` is the config every run shares
-(on top of the default scenario), ``PROFILES`` the pop-up schedules of Figs 4-2 to 4-4, ``SWEEP_TASKS`` and
-``SWEEP_AGENTS`` the points of Fig 4-5, ``FAULTS`` the networks of the comparison with CBBA, ``DEFAULT_SEEDS`` the
-seeds per point, ``TICK_MS`` and ``BIN`` the units; the 1,000 random scenarios are ``acbba_check.scenario(seed)``.
+(on top of the default scenario), ``PROFILES`` the pop-up schedules of Figs 4-2 to 4-4, ``CLOCKS`` the settings of
+``local_convergence`` compared there, ``SWEEP_TASKS`` and ``SWEEP_AGENTS`` the points of Fig 4-5, ``FAULTS`` the
+networks of the comparison with CBBA, ``DEFAULT_SEEDS`` the seeds per point, ``TICK_MS`` and ``BIN`` the units;
+the 1,000 random scenarios are ``acbba_check.scenario(seed)``.
 They are not experiment files because the experiment runner (``taskalloc.evaluation.experiments``) tabulates per-episode
 scalar metrics paired across series, while these figures need the per-broadcast tick log binned into profiles,
 bursts per pop-up, correlations across seeds, and a path-by-path comparison of two solvers' allocations on one seed;
@@ -59,6 +64,7 @@ PROFILES = {
     "Fig 4-4: 10 tasks, then one every 0.05 s": {"popup_tasks": 25, "popup_period": 50},
     "Fig 4-4 regime: one every 5 ms (< a burst)": {"popup_tasks": 25, "popup_period": 5},
 }
+CLOCKS = ("bundle", "table")          # local_convergence: the default first
 FAULTS = {"perfect links": {}, "20 % loss": {"message_loss": 0.2}, "delay 0–3 ticks": {"max_delay": 3},
           "20 % loss + delay 0–3": {"message_loss": 0.2, "max_delay": 3}}
 
@@ -72,9 +78,14 @@ def episode(args: tuple[str, dict[str, Any], int]) -> dict[str, Any]:
     obs, infos = env.reset(seed=seed)
     agent.start(env, seed)
     steps = changed_step = 0
+    local = _LocalWatch(env) if env.config.asynchronous else None
     while env.agents:                       # env steps: the common unit (one decision per agent per step)
         last = env.protocol.counters.rounds_to_agreement
+        if local:
+            local.before()
         obs, _, _, _, infos = env.step(agent.act({a: obs[a] for a in env.agents}, infos))
+        if local:
+            local.after()
         steps += 1
         changed_step = steps if env.protocol.counters.rounds_to_agreement != last else changed_step
     alloc = env.evaluate()
@@ -87,10 +98,72 @@ def episode(args: tuple[str, dict[str, Any], int]) -> dict[str, Any]:
         row.update(broadcasts=c.broadcasts, quiet=c.quiet_tick, local=c.local_tick, separation=c.separation_ticks,
                    records=sum(items for _, _, items in p.broadcast_log) / 4, time=c.quiet_tick,
                    ticks=[t for t, _, _ in p.broadcast_log], items=[n for _, _, n in p.broadcast_log],
-                   releases=sorted(set(p.release_tick.tolist()) - {0}))
+                   senders=[k for _, k, _ in p.broadcast_log], releases=sorted(set(p.release_tick.tolist()) - {0}),
+                   **local.summary())
     else:                       # every live agent broadcasts its table once per round
         row.update(broadcasts=c.rounds * env.config.n_agents)
     return row
+
+
+class _LocalWatch:
+    """Per tick of an asynchronous episode: the agents declared locally converged at the ticks with broadcasts (from
+    the first pop-up on, when there are pop-ups); the agents whose bundle changed between two pop-up releases, at any
+    tick (bidders) and for good (net); declarations, and those broken: the agent's bundle changed afterwards with no
+    pop-up released in between (a premature declaration)."""
+
+    def __init__(self, env: TaskAllocEnv) -> None:
+        self.p = env.protocol
+        self.releases = sorted(set(self.p.release_tick.tolist()) - {0})
+        self.traffic = self.declared_traffic = self.declared_agents = 0
+        self.series: list[int] = []                    # agents declared after each tick
+        self.bundles = self._bundles()
+        self.start = self.bundles                      # the bundles when the current pop-up was released
+        self.moved: set[int] = set()
+        self.bidders: list[int] = []
+        self.net: list[int] = []
+        self.armed = np.zeros(len(self.bundles), dtype=bool)   # declared since the last pop-up and bundle change
+        self.declarations = self.broken = 0
+
+    def _bundles(self) -> list[tuple[int, ...]]:
+        return [tuple(b) for b in self.p.knowledge.bundles]
+
+    def before(self) -> None:
+        self.tick, self.declared = self.p.round, self.p.agents_locally_converged.copy()
+
+    def after(self) -> None:
+        p = self.p
+        popups = self.tick >= (self.releases[0] if self.releases else 0)
+        if popups and p.broadcast_log and p.broadcast_log[-1][0] == self.tick:    # broadcasts at this tick
+            self.traffic += 1
+            self.declared_traffic += bool(self.declared.any())
+            self.declared_agents += int(self.declared.sum())
+        self.series.append(int(p.agents_locally_converged.sum()))
+        now = self._bundles()
+        if p.round in self.releases:                   # a pop-up: close the interval of the previous one
+            self._close(now)
+            self.armed[:] = False                      # new information: a declaration may end
+        changed = np.array([b != c for b, c in zip(self.bundles, now)])
+        self.broken += int((changed & self.armed).sum())           # declared, then the bundle changed
+        self.armed &= ~changed
+        declared = p.agents_locally_converged
+        self.declarations += int((declared & ~self.armed).sum())
+        self.armed |= declared
+        self.moved |= set(np.flatnonzero(changed).tolist())
+        self.bundles = now
+
+    def _close(self, now: list[tuple[int, ...]]) -> None:
+        if self.p.round != self.releases[0]:
+            self.bidders.append(len(self.moved))
+            self.net.append(sum(b != c for b, c in zip(self.start, now)))
+        self.start, self.moved = now, set()
+
+    def summary(self) -> dict[str, Any]:
+        if self.releases:
+            self._close(self._bundles())
+        return {"traffic": self.traffic, "declared_traffic": self.declared_traffic,
+                "declared_agents": self.declared_agents, "declarations": self.declarations, "broken": self.broken,
+                "declared_series": self.series,
+                "popup_bidders": self.bidders, "popup_net": self.net}
 
 
 def run_all(cases: list[tuple[str, dict[str, Any], int]], jobs: int) -> list[dict[str, Any]]:
@@ -102,8 +175,11 @@ def mean_sd(values: Sequence[float], digits: int = 0) -> str:
     return f"{values.mean():.{digits}f} ± {values.std(ddof=1) if len(values) > 1 else 0.0:.{digits}f}"
 
 
+LISTS = ("ticks", "senders", "releases", "paths", "declared_series", "popup_bidders", "popup_net")
+
+
 def write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
-    keys = [k for k in rows[0] if k not in ("ticks", "releases", "paths")]
+    keys = [k for k in rows[0] if k not in LISTS]
     with open(path, "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
         writer.writeheader()
@@ -124,15 +200,25 @@ def bursts(row: dict[str, Any]) -> tuple[list[int], list[float], list[int]]:
     return sizes, carried, lengths
 
 
+def popup_agents(row: dict[str, Any]) -> list[int]:
+    """Per pop-up release until the next one: how many agents broadcast."""
+    ticks, senders = np.asarray(row["ticks"]), np.asarray(row["senders"])
+    edges = [*row["releases"], np.inf]
+    return [len(set(senders[(ticks >= start) & (ticks < nxt)].tolist())) for start, nxt in itertools.pairwise(edges)]
+
+
 def profiles(seeds: int, jobs: int, out: Path) -> str:
-    cases = [("acbba", {**JOHNSON, **extra}, s) for extra in PROFILES.values() for s in range(seeds)]
+    runs = [(name, clock) for name, extra in PROFILES.items() for clock in CLOCKS
+            if clock == CLOCKS[0] or extra]           # the other clocks only where pop-ups are negotiated
+    cases = [("acbba", {**JOHNSON, **PROFILES[name], "local_convergence": clock}, s)
+             for name, clock in runs for s in range(seeds)]
     rows = run_all(cases, jobs)
-    for row, (name, _) in zip(rows, [(n, s) for n in PROFILES for s in range(seeds)]):
-        row["experiment"] = name
+    for row, (name, clock) in zip(rows, [run for run in runs for _ in range(seeds)]):
+        row["experiment"], row["local_convergence"] = name, clock
     write_csv(out / "profiles.csv", rows)
     body = []
     for name in PROFILES:
-        cell = [r for r in rows if r["experiment"] == name]
+        cell = [r for r in rows if r["experiment"] == name and r["local_convergence"] == CLOCKS[0]]
         second = [np.asarray(r["ticks"]) < 1000 / TICK_MS for r in cell]
         line = [name, f"{sum(r['converged'] for r in cell)}/{len(cell)}",
                 f"{mean_sd([r['broadcasts'] for r in cell])} ({mean_sd([r['records'] for r in cell])})",
@@ -150,15 +236,38 @@ def profiles(seeds: int, jobs: int, out: Path) -> str:
         else:
             line += ["–", "–", "–"]
         body.append(line)
-    _plot_profiles(rows, out)
+    _plot_profiles([r for r in rows if r["local_convergence"] == CLOCKS[0]], out)
     header = ["experiment (8 agents, L = 5, 35 tasks)", "quiet", "broadcasts (task records)",
               "in the first second", "quiet at (ms)", "per pop-up", "pop-up burst (ms)",
               "runs quiet before each next pop-up"]
-    return markdown_table(header, body)
+    return markdown_table(header, body) + "\n\n" + _local_table(rows, runs)
+
+
+def _local_table(rows: list[dict[str, Any]], runs: list[tuple[str, str]]) -> str:
+    """Local convergence while the pop-ups are negotiated (Johnson l. 939), per pop-up profile and clock."""
+    body = []
+    for name, clock in runs:
+        cell = [r for r in rows if r["experiment"] == name and r["local_convergence"] == clock]
+        if not cell[0]["releases"]:
+            continue
+        traffic = sum(r["traffic"] for r in cell)
+        declared = sum(r["declared_traffic"] for r in cell)
+        body.append([name, clock, mean_sd([n for r in cell for n in popup_agents(r)], 1),
+                     mean_sd([n for r in cell for n in r["popup_bidders"]], 1),
+                     mean_sd([n for r in cell for n in r["popup_net"]], 1), str(traffic),
+                     f"{declared} ({100 * declared / max(traffic, 1):.1f} %)",
+                     f"{sum(r['declared_agents'] for r in cell) / max(traffic, 1):.2f}",
+                     f"{sum(r['broken'] for r in cell)} of {sum(r['declarations'] for r in cell)}"])
+    return markdown_table(["pop-ups (8 agents, L = 5, 35 tasks)", "local_convergence", "agents broadcasting per "
+                           "pop-up", "agents bidding per pop-up", "bundles changed for good per pop-up",
+                           "ticks with broadcasts from the first pop-up", "… with an agent locally converged",
+                           "agents converged at those ticks (mean)",
+                           "declarations broken by a bundle change before the next pop-up"], body)
 
 
 def _plot_profiles(rows: list[dict[str, Any]], out: Path) -> None:
-    """Broadcasts per 10-ms bin for seed 0: Fig 4-2 (whole run), 4-3 and 4-4 (first second, and the whole run)."""
+    """Broadcasts per 10-ms bin for seed 0: Fig 4-2 (whole run), 4-3 and 4-4 (first second, and the whole run), with
+    the number of agents locally converged after each tick (green)."""
     names = list(PROFILES)
     fig, axes = plt.subplots(len(names), 2, figsize=(12, 3 * len(names)))
     for ax_row, name in zip(axes, names):
@@ -174,6 +283,12 @@ def _plot_profiles(rows: list[dict[str, Any]], out: Path) -> None:
                     ax.axvline(release * TICK_MS / 1000, color="tab:red", lw=0.5, alpha=0.5)
             ax.set_xlabel("time (s; 1 tick = 1 ms)")
             ax.set_ylabel(f"broadcasts per {width} ms")
+            declared = np.asarray(row["declared_series"][:limit])      # after ticks 1, 2, ...
+            twin = ax.twinx()
+            twin.step(np.arange(1, declared.size + 1) * TICK_MS / 1000, declared, where="post", color="tab:green",
+                      lw=0.8)
+            twin.set_ylim(0, JOHNSON["n_agents"] + 0.5)
+            twin.set_ylabel("agents locally converged", color="tab:green", fontsize=8)
         ax_row[0].set_title(f"{name}: first second", fontsize=9)
         ax_row[1].set_title(f"{name}: whole run ({row['broadcasts']} broadcasts)", fontsize=9)
     fig.tight_layout()

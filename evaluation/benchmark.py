@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from taskalloc.evaluation import benchmark_stats as bstats
-from taskalloc.evaluation.episodes import default_jobs, policy_for
+from taskalloc.evaluation.episodes import default_jobs, solver_name
 from taskalloc.evaluation.suite_episodes import ROW_FIELDS, play_task
 from taskalloc.evaluation.suite_reference import load_reference, means, write_reference
 from taskalloc_env.errors import ConfigError, InvalidActionError
@@ -40,7 +40,7 @@ FILES = ("episodes.csv", "summary.json", "summary.md", "marl_eval.json")
 def check_policy(name: str) -> str:
     """The policy's display name; a name or path that does not resolve is a ``ConfigError`` (one line)."""
     try:
-        return policy_for(name).name
+        return solver_name(name)
     except ConfigError:
         raise
     except (ValueError, TypeError, ImportError, OSError) as exc:

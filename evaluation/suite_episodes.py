@@ -46,5 +46,9 @@ def play(job: tuple[str, str, int, str]) -> dict[str, Any]:
 
 def play_task(solver: str, task_id: str, seeds: Sequence[int], invalid_action: str = "noop",
               jobs: int = 1) -> list[dict[str, Any]]:
-    """``solver`` on every seed of ``task_id`` (in ``jobs`` processes), rows in seed order."""
+    """``solver`` on every seed of ``task_id`` (in ``jobs`` processes), rows in seed order. The exact optimum runs
+    only where the suite takes it as the best known (elsewhere it would not finish): a ``ValueError`` there."""
+    if solver.lower() == "exact" and task(task_id).best_known != "exact":
+        raise ValueError(f"exact runs only on the tasks whose best known is the exact optimum, not on {task_id} "
+                         f"(best known: {task(task_id).best_known})")
     return list(parallel_map(play, [(solver, task_id, int(s), invalid_action) for s in seeds], jobs))

@@ -37,8 +37,14 @@ loss-free networks, docs/decisions.md).
 
 Convergence (Johnson §4.1.3): *global* when the network is quiet — no message travelling or queued, every buffer
 empty, no build running, no event still to come ("Once the network goes quiet in this configuration we say that the
-network has converged", line 921); *local* for an agent when nothing relevant reached it for more than
-``separation_time`` ticks (lines 941–943). The episode terminates at global convergence, or at local convergence of
+network has converged", line 921); *local* for an agent after more than ``separation_time`` ticks of its separation
+clock (lines 941–943). What restarts the clock is ``local_convergence``: ``bundle`` (default), a change of the agent's
+own bundle (a bid, a quit, a release) or of the record of a task it holds (outbid, its bid disputed), and the agent
+declares only with its builder idle and no news waiting, so that agents which keep their bundles "can decide that
+they have reached self convergence ... even though others are still actively engaging in a consensus phase" (line
+939); ``table``, any relevant information (every table action but the sink, a release, a failure notice: "any
+information that affects the local agents' ACBBA state", line 941, read literally). Builder wake-ups and
+rebroadcasts are Table 4.1's under both. The episode terminates at global convergence, or at local convergence of
 every live agent (``termination``; ``auto``: local with pop-up tasks). T_max (``episode_bound``) truncates it.
 """
 
@@ -83,7 +89,10 @@ class AsyncProtocol(Protocol):
         self.notices: dict[int, tuple[int, ...]] = {}         # tick → failed agents announced then
         self.last_relevant = np.zeros(n, dtype=np.int64)
         self.quiet_since = np.zeros(n, dtype=np.int64)        # last relevant news or own confirmation
+        self.settled_since = np.zeros(n, dtype=np.int64)      # last change of the own bundle or of a held record
         self.confirmed = np.zeros(n, dtype=np.int64)          # confirmations sent since the last relevant news
+        self.confirmed_at = np.zeros(n, dtype=np.int64)       # the tick of the last confirmation
+        self.declared_at = np.full(n, -1, dtype=np.int64)     # the tick the current declaration began, −1: none
         self.broadcast_log: list[tuple[int, int, int]] = []   # (tick, sender, data items) of every broadcast
         self.quiet = False
         self.local = False
@@ -107,6 +116,7 @@ class AsyncProtocol(Protocol):
         else:
             self.times.entry[agent, agent, task] = stamp(self.round, agent)
         self.outgoing[agent, task] = True
+        self._settle(agent)
         return value
 
     def quit(self, agent: int, task: int) -> list[int]:
@@ -114,6 +124,7 @@ class AsyncProtocol(Protocol):
         held = self.knowledge.own_bids()[agent] > 0
         released = super().quit(agent, task)
         self._withdrawn(agent, [task, *released], held)
+        self._settle(agent)
         return released
 
     def release(self, agent: int, task: int) -> list[int]:
@@ -121,6 +132,7 @@ class AsyncProtocol(Protocol):
         held = self.knowledge.own_bids()[agent] > 0
         released = super().release(agent, task)
         self._withdrawn(agent, [task, *released], held)
+        self._settle(agent)
         return released
 
     def finish(self, agent: int) -> None:
@@ -237,6 +249,7 @@ class AsyncProtocol(Protocol):
                 continue
             receivers = receiver[live]
             messages = [self.payloads[(int(k), int(t))] for k, t in zip(sender[live], sent[live])]
+            held = self.knowledge.own_bids()[receivers] > 0
             relevant = listen(self.knowledge, self.times, receivers, messages, now, self.cfg,
                               self.scenario.task_agents, self.equipment)
             self.outgoing[receivers] |= relevant
@@ -245,6 +258,7 @@ class AsyncProtocol(Protocol):
             gap = now - self.last_relevant[heard]
             self.counters.separation_ticks = max(self.counters.separation_ticks, int(gap.max(initial=0)))
             self._news(heard)
+            self._settle(receivers[(relevant & held).any(axis=1)])
             self.counters.messages += len(live)
             self.counters.informative_messages += int(news.sum())
             self.counters.data_items += sum(msg.data_items for msg in messages)
@@ -256,6 +270,11 @@ class AsyncProtocol(Protocol):
         self.quiet_since[agents] = self.round
         self.confirmed[agents] = 0
 
+    def _settle(self, agents: np.ndarray | int) -> None:
+        """The own state of ``agents`` changed now: their bundle, or the record of a task they hold (the clock of
+        ``local_convergence = bundle``)."""
+        self.settled_since[agents] = self.round
+
     def _confirm(self) -> None:
         """Agents quiet for ``separation_time`` ticks that still owe a confirmation announce every record they hold."""
         due = (self.alive & (self.confirmed < self.cfg.confirmation_count) & (self.ready_at == IDLE)
@@ -266,6 +285,7 @@ class AsyncProtocol(Protocol):
         self.inbox[due] = True
         self.confirmed[due] += 1
         self.quiet_since[due] = self.round
+        self.confirmed_at[due] = self.round
 
     def _held(self) -> np.ndarray:
         """(N, M) the released tasks each agent has a record of (what a full announcement carries)."""
@@ -305,6 +325,7 @@ class AsyncProtocol(Protocol):
                 continue
             released = kn.release(i, lost, self.cfg.release_order)
             self._withdrawn(i, [lost, *released], own[i] > 0)
+            self._settle(i)
             self._dirty.add(i)
 
     # -- failures --------------------------------------------------------------------------------------------------
@@ -331,6 +352,8 @@ class AsyncProtocol(Protocol):
                 entries = np.flatnonzero(~kn.single & listed)
                 if not (single.size or entries.size):
                     continue
+                if (kn.own_bids()[i, entries] > 0).any():      # a group it belongs to lost a member
+                    self._settle(i)
                 kn.set_single_columns(np.full(single.size, i), single, np.full(single.size, NONE),
                                       np.zeros(single.size))
                 for j in entries:
@@ -358,14 +381,16 @@ class AsyncProtocol(Protocol):
         quiet = (not ahead and not len(self.network.in_flight()) and not self.queue.shape[1]
                  and not self.outgoing[live].any() and not self.inbox[live].any()
                  and not (self.ready_at[live] != IDLE).any())
-        local = not ahead and bool(np.all(self.agents_locally_converged[live]))
+        declared = self.agents_locally_converged
+        self.declared_at = np.where(declared, np.where(self.declared_at >= 0, self.declared_at, self.round), -1)
+        local = not ahead and bool(np.all(declared[live]))
         c = self.counters
         if local and not self.local:
             c.local_tick = self.round
         if quiet and not self.quiet:
             c.quiet_tick = self.round
             if not (local or self.local):   # nothing relevant can come: each agent declares itself converged later
-                c.local_tick = int(self.quiet_since[live].max(initial=0)) + self.cfg.separation_time + 1
+                c.local_tick = int(self._clock()[live].max(initial=0)) + self.cfg.separation_time + 1
         self.quiet, self.local = self.quiet or quiet, self.local or local
         if self.quiet:
             self._decide(True, "the network went quiet with the agents' tables disagreeing: a lost message is never "
@@ -375,18 +400,30 @@ class AsyncProtocol(Protocol):
             self._decide(self.local and self.cfg.local_termination,
                          "every agent declared local convergence, but the agents' tables disagree")
 
+    def _clock(self) -> np.ndarray:
+        """(N,) the tick each agent's separation clock last restarted (``local_convergence``): its last relevant news
+        or confirmation (``table``), or the last change of its own state or its last confirmation (``bundle``)."""
+        if self.cfg.local_convergence == "table":
+            return self.quiet_since
+        return np.maximum(self.settled_since, self.confirmed_at)
+
     @property
     def agents_locally_converged(self) -> np.ndarray:
-        """(N,) each live agent's own declaration (Johnson §4.1.3, separation time, l. 941–943): nothing relevant
-        reached it for more than ``separation_time`` ticks, after its confirmations (our rule). It knows nothing of
-        future events, so it may declare before a pop-up task and withdraw the declaration when one arrives."""
-        return (self.alive & (self.round - self.quiet_since > self.cfg.separation_time)
-                & (self.confirmed >= self.cfg.confirmation_count))
+        """(N,) each live agent's own declaration (Johnson §4.1.3, separation time, l. 939–943): its clock
+        (``_clock``) ran for more than ``separation_time`` ticks, after its confirmations (our rule); with
+        ``local_convergence = bundle`` also its builder idle with no news waiting ("when it is clear that they will
+        not win it", l. 939). It knows nothing of future events, so it may declare before a pop-up task and
+        withdraw the declaration when one arrives (every builder wakes)."""
+        declared = (self.alive & (self.round - self._clock() > self.cfg.separation_time)
+                    & (self.confirmed >= self.cfg.confirmation_count))
+        if self.cfg.local_convergence == "bundle":
+            declared &= (self.ready_at == IDLE) & ~self.inbox
+        return declared
 
     @property
     def local_ticks(self) -> np.ndarray:
-        """(N,) the tick each agent declared itself locally converged, −1 while it has not."""
-        return np.where(self.agents_locally_converged, self.quiet_since + self.cfg.separation_time + 1, -1)
+        """(N,) the tick each agent's current declaration of local convergence began, −1 while it has none."""
+        return self.declared_at.copy()
 
     @property
     def livelocked(self) -> bool:

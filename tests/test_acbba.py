@@ -10,7 +10,9 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
-from helpers import agent, build, episode_digest, task
+from helpers import agent, build, episode_digest, examples, task
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from taskalloc.evaluation import acbba_check
 from taskalloc.policies import make_policy, rollout
@@ -175,12 +177,13 @@ def _declarations(env: TaskAllocEnv, policy: str, seed: int) -> list[tuple[int, 
     return seen
 
 
-def test_each_agent_declares_its_own_local_convergence_in_infos():
+@pytest.mark.parametrize("clock", ["bundle", "table"])
+def test_each_agent_declares_its_own_local_convergence_in_infos(clock):
     """Johnson §4.1.3 (separation time, l. 941–943): an agent declares itself converged after more than
     ``separation_time`` ticks without relevant news; the run is locally converged at the tick the last one does.
     Slow listeners (0.5–2 ticks per message) spread the agents' last news, so they declare at different ticks."""
     env = TaskAllocEnv(n_agents=5, n_tasks=10, consensus="acbba", separation_time=10, termination="local",
-                       message_ticks=(0.5, 2.0), **DMG)
+                       message_ticks=(0.5, 2.0), local_convergence=clock, **DMG)
     seen = _declarations(env, "acbba", seed=2)
     declared_first: dict[str, int] = {}
     for tick, infos in seen:
@@ -198,10 +201,12 @@ def test_each_agent_declares_its_own_local_convergence_in_infos():
     assert not all(info["locally_converged"] for info in before_last.values())
 
 
-def test_a_popup_task_withdraws_every_declaration_and_sync_infos_have_none():
-    """An agent does not know the future: it may declare before a pop-up, and the release is news to every agent."""
+@pytest.mark.parametrize("clock", ["bundle", "table"])
+def test_a_popup_task_withdraws_every_declaration_and_sync_infos_have_none(clock):
+    """An agent does not know the future: it may declare before a pop-up, and the release is news to every agent
+    (under ``bundle`` its builder wakes, so it declares again only once the build has run)."""
     env = TaskAllocEnv(n_agents=4, n_tasks=8, consensus="acbba", separation_time=10, popup_tasks=1,
-                       popup_times=[150], **DMG)
+                       popup_times=[150], local_convergence=clock, **DMG)
     seen = _declarations(env, "acbba", seed=0)
     at = {tick: infos for tick, infos in seen}
     assert all(info["locally_converged"] for info in at[149].values())
@@ -209,6 +214,133 @@ def test_a_popup_task_withdraws_every_declaration_and_sync_infos_have_none():
     assert all(info["locally_converged"] for info in seen[-1][1].values()) and seen[-1][0] > 150
     _, infos = TaskAllocEnv(n_agents=3, n_tasks=4, **DMG).reset(seed=0)
     assert all("locally_converged" not in info for info in infos.values())
+
+
+# -- local convergence while others negotiate (Johnson §4.1.3, l. 939; ``local_convergence``) -----------------------
+RELEASE = 60
+
+
+def _popup_scene(clock: str) -> TaskAllocEnv:
+    """Five agents on a line, bundles of one task: agents 2 and 3 hold the tasks next to them, agent 4 (out of range
+    of everybody, comm_range 7) holds one only it can reach; agents 0 and 1 hold nothing. At tick 60 a task pops
+    up next to agent 0: agents 0 and 1 bid and settle who wins, the others cannot bid (full bundles)."""
+    s = build([agent(0), agent(1), agent(3), agent(5), agent(9.5, 9)],
+              [task(3.1, start=0, end=50), task(5.1, start=0, end=50), task(9.5, 9.1, start=0, end=1),
+               task(0.4, start=0, end=50)])
+    return TaskAllocEnv(scenario=s, consensus="acbba", max_bundle=1, comm_range=7.0, popup_tasks=1,
+                        popup_times=[RELEASE], build_ticks=(1, 1), message_ticks=(0.0, 0.0), separation_time=10,
+                        local_convergence=clock, termination="global", distance_cost="from_start",
+                        marginal_gain="frozen", invalid_action="raise")
+
+
+def _ticks(env: TaskAllocEnv) -> dict[int, dict]:
+    """Per tick: the agents declared, the broadcasters and each agent's record of the pop-up task (task 3)."""
+    seen: dict[int, dict] = {}
+
+    def watch(when, env, actions, ready, tick):
+        p = env.protocol
+        if when == "before":
+            seen[tick] = {"declared": p.agents_locally_converged.copy(), "tables": p.knowledge.winner.copy(),
+                          "times": p.times.task.copy()}
+        else:
+            seen[tick]["broadcast"] = {a for t, a, _ in p.broadcast_log if t == tick}
+
+    alloc = _drive(env, "acbba", seed=0, watch=watch)
+    assert alloc.converged and alloc.agreement and alloc.paths == ((3,), (), (0,), (1,), (2,))
+    return seen
+
+
+@pytest.mark.parametrize("clock", ["bundle", "table"])
+def test_a_popup_announcement_sends_nothing_and_only_agents_whose_tables_change_rebroadcast(clock):
+    """After a pop-up near agent 0 the first broadcasts are the bids of the two agents that can take it (Johnson
+    l. 763: a build's changes go out when it completes); the full agents broadcast only once their table holds a bid
+    on the pop-up (Table 4.1's update & rebroadcast, rows 12 and 7); agent 4, out of range, learns of the task but
+    hears no bid: its table never changes and it never broadcasts. The announcement itself sends nothing."""
+    seen = _ticks(_popup_scene(clock))
+    after = [t for t in sorted(seen) if t >= RELEASE]
+    first = next(t for t in after if seen[t]["broadcast"])
+    assert seen[first]["broadcast"] == {0, 1} and first > RELEASE
+    for t in after:
+        assert 4 not in seen[t]["broadcast"]
+        assert (seen[t]["tables"][4] == seen[RELEASE]["tables"][4]).all()
+        assert (seen[t]["times"][4] == seen[RELEASE]["times"][4]).all()
+        for a in seen[t]["broadcast"] & {2, 3}:
+            assert seen[t]["tables"][a, 3] in (0, 1)          # its record of the pop-up: a bidder's bid
+
+
+@pytest.mark.parametrize("clock", ["bundle", "table"])
+def test_agents_that_keep_their_bundles_declare_while_the_bidders_negotiate(clock):
+    """Johnson l. 939: agents that "will not change their bundles based on the presence of this task ... can decide
+    that they have reached self convergence ... even though others are still actively engaging in a consensus
+    phase". Under ``bundle`` the full agents are declared when the bidders broadcast their bids, and agent 4 stays
+    declared throughout except while its builder checks the new task; under ``table`` (any relevant news restarts
+    the clock, l. 941 read literally) nobody is declared while the pop-up is negotiated."""
+    seen = _ticks(_popup_scene(clock))
+    assert seen[RELEASE - 1]["declared"].all() and max(seen) < RELEASE + 10
+    first = next(t for t in sorted(seen) if t >= RELEASE and seen[t]["broadcast"])
+    talks = [t for t in sorted(seen) if t >= RELEASE and seen[t]["broadcast"] & {0, 1}]
+    if clock == "bundle":
+        assert seen[first]["declared"].tolist() == [False, False, True, True, True]
+        assert all(seen[t]["declared"][4] for t in range(RELEASE + 2, max(seen) + 1))
+        assert not any(seen[t]["declared"][:2].any() for t in talks)
+    else:
+        assert not any(seen[t]["declared"].any() for t in seen if t >= RELEASE)     # the run is quiet before
+
+
+@settings(max_examples=examples(200), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(n_agents=st.integers(2, 5), n_tasks=st.integers(2, 7), popups=st.integers(0, 3),
+       period=st.sampled_from([3, 15, 40]), faults=st.sampled_from([{}, {"max_delay": 2}, {"message_loss": 0.2},
+                                                                   {"comm_range": 2.0}]),
+       sep=st.sampled_from([5, 12]), seed=st.integers(0, 10_000))
+def test_the_clock_changes_who_is_declared_never_what_is_sent_or_allocated(n_agents, n_tasks, popups, period,
+                                                                           faults, sep, seed):
+    """``local_convergence`` moves only the declarations: with the episode run to quiet (``termination=global``)
+    both settings send the same broadcasts and end with the same tables. Under ``bundle`` a declared agent's
+    bundle and the records of the tasks it holds (bid, time) have not changed for more than ``separation_time``
+    ticks and its builder is idle."""
+    config = {"n_agents": n_agents, "n_tasks": min(n_tasks + popups, 9), "popup_tasks": popups,
+              "popup_period": period, "consensus": "acbba", "termination": "global", "separation_time": sep,
+              **faults, **DMG}
+    runs = {}
+    for clock in ("table", "bundle"):
+        history: list[tuple[list[list[int]], np.ndarray, np.ndarray]] = []
+
+        def watch(when, env, actions, ready, tick, history=history, clock=clock):
+            p = env.protocol
+            if when != "after":
+                return
+            own = p.knowledge.own_bids()                  # the agent's own records: bids and their times
+            history.append(([list(b) for b in p.knowledge.bundles], own.copy(), np.where(own > 0, p.times.task, NEVER)))
+            if clock != "bundle":
+                return
+            for i in np.flatnonzero(p.agents_locally_converged):
+                assert p.ready_at[i] == -1 and not p.inbox[i]
+                window = history[-(sep + 1):]
+                last = window[-1]
+                assert all(b[i] == last[0][i] and (y[i] == last[1][i]).all() and (t[i] == last[2][i]).all()
+                           for b, y, t in window)
+
+        env = TaskAllocEnv(**config, local_convergence=clock)
+        alloc = _drive(env, "acbba", seed, watch=watch)
+        runs[clock] = (env.protocol.broadcast_log, alloc.paths, env.protocol.knowledge.winner.copy(), alloc.converged)
+    assert runs["table"][0] == runs["bundle"][0] and runs["table"][1:2] == runs["bundle"][1:2]
+    assert (runs["table"][2] == runs["bundle"][2]).all() and runs["table"][3] == runs["bundle"][3]
+
+
+@pytest.mark.slow
+def test_in_johnsons_popup_setting_agents_declare_while_others_broadcast():
+    """Johnson's 8 agents × 35 tasks, 10 at the start and a pop-up every 50 ticks (``taskalloc acbba-experiments
+    profiles`` measures it on 20 seeds): under ``bundle`` some agent is declared at a share of the ticks with
+    broadcasts, under ``table`` at none; both end quiet and in agreement."""
+    from taskalloc.evaluation.acbba_experiments import JOHNSON, episode
+
+    shares = {}
+    for clock in ("bundle", "table"):
+        rows = [episode(("acbba", {**JOHNSON, "popup_tasks": 25, "popup_period": 50, "local_convergence": clock}, s))
+                for s in range(2)]
+        assert all(r["converged"] and r["agreement"] for r in rows)
+        shares[clock] = sum(r["declared_traffic"] for r in rows) / sum(r["traffic"] for r in rows)
+    assert shares["table"] == 0 and shares["bundle"] > 0.1
 
 
 # -- error messages ----------------------------------------------------------------------------------------------------

@@ -232,6 +232,15 @@ def test_a_task_the_policy_refuses_is_reported_not_applicable(user_module):
     assert "not applicable: trained on 4 agents" in benchmark.markdown(summary)
 
 
+def test_centralised_solvers_run_and_exact_only_where_it_is_the_best_known():
+    summary, _ = benchmark.run(["sgama"], ["taskalloc/Small-v0"], episodes=2)
+    assert summary["policy"] == "SGAMA" and summary["tasks"]["taskalloc/Small-v0"]["episodes"] == 2
+    summary, rows = benchmark.run(["exact"], ["taskalloc/Small-v0", "taskalloc/Default-v0"], episodes=2)
+    reference = load_reference("v0")["tasks"]["taskalloc/Small-v0"]
+    assert [r["score"] for r in rows] == pytest.approx(reference["best_known"][:2])
+    assert summary["tasks"]["taskalloc/Default-v0"]["not_applicable"].startswith("exact runs only on the tasks")
+
+
 def test_missing_rliable_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "rliable", None)
     with pytest.raises(ConfigError, match=r"taskalloc\[benchmark\]"):

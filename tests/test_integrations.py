@@ -64,6 +64,19 @@ def test_torchrl_rolls_out_the_batched_env():
 
 
 @pytest.mark.slow
+def test_torchrl_mappo_trains_on_the_batched_env():
+    pytest.importorskip("torchrl")
+    result = recipe("torchrl_mappo").main(iterations=2, instances=8, steps=16)
+    assert result["frames"] == 2 * 8 * 16 and result["episodes"] > 0
+
+
+@pytest.mark.slow
+def test_the_shipped_benchmarl_task_trains_where_benchmarl_is_installed():
+    pytest.importorskip("benchmarl")           # its own venv: bash scripts/heavy_integrations.sh benchmarl
+    assert recipe("benchmarl_task").main() == {"MappoConfig": 400, "IppoConfig": 400}
+
+
+@pytest.mark.slow
 def test_tianshou_plays_the_aec_view():
     pytest.importorskip("tianshou")
     result = recipe("tianshou_aec").main(episodes=2, dqn_steps=64)

@@ -12,21 +12,19 @@ import torch
 from ray.rllib.algorithms.ppo import PPOConfig
 from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
-from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
 from ray.rllib.examples.rl_modules.classes.action_masking_rlm import ActionMaskingTorchRLModule
 from ray.tune.registry import register_env
 
-from taskalloc_env import taskalloc_v0
-from taskalloc_env.wrappers.rllib import RLlibObservations
+from taskalloc_env.wrappers.rllib import env_creator
 
 
 def main(iterations: int = 2, env_runners: int = 0) -> dict[str, float]:
     torch.set_num_threads(1)
     ray.init(address=os.environ.get("RAY_ADDRESS", "local"), include_dashboard=False, log_to_driver=False)
-    register_env("taskalloc", lambda cfg: ParallelPettingZooEnv(RLlibObservations(taskalloc_v0.parallel_env(**cfg))))
+    register_env("taskalloc", env_creator)                   # env_config: parallel_env's keywords or a suite task
     config = (
         PPOConfig()
-        .environment("taskalloc", env_config={"scenario": "train_small"})
+        .environment("taskalloc", env_config={"task": "taskalloc/Small-v0"})
         .env_runners(num_env_runners=env_runners)                    # 0: sample in this process
         .learners(num_learners=0)
         .multi_agent(policies={"shared"}, policy_mapping_fn=lambda agent_id, *args, **kwargs: "shared")

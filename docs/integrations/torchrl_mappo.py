@@ -34,8 +34,7 @@ def main(iterations: int = 2, instances: int = 16, steps: int = 32, seed: int = 
                   value=("uav", "state_value"), done=("uav", "done"), terminated=("uav", "terminated"))
     loss.make_value_estimator(ValueEstimators.GAE, gamma=1.0, lmbda=0.95)
     optimiser = torch.optim.Adam(loss.parameters(), lr=3e-4)
-    collector = Collector(env, actor, frames_per_batch=instances * steps,
-                                  total_frames=iterations * instances * steps,
+    collector = Collector(env, actor, frames_per_batch=instances * steps, total_frames=iterations * instances * steps,
                           auto_register_policy_transforms=False)
     buffer = ReplayBuffer(storage=LazyTensorStorage(instances * steps), sampler=SamplerWithoutReplacement(),
                           batch_size=instances * steps // 4)

@@ -18,8 +18,15 @@ ASYNC_GROUP = group("asynchronous", (
                    'uniform integer draw'),
           source='Johnson §4.1.1 (throttled builder); values choice'),
     Field('separation_time', 'int', low=1, time_like=True, default=25,
-          meaning='ticks without relevant information after which an agent counts as locally converged',
+          meaning=('ticks of its separation clock (`local_convergence`) after which an agent counts as locally '
+                   'converged'),
           source='Johnson §4.1.3 (separation time); value measured ([decisions](decisions.md))'),
+    Field('local_convergence', 'choice', choices=('bundle', 'table'), default='bundle',
+          meaning=("what an agent's local-convergence declaration waits on: its bundle and the records of the tasks "
+                   'it holds unchanged for more than `separation_time` ticks, its builder idle \\| `table`: no '
+                   'relevant information at all (any table change, a release, a failure notice) for that long'),
+          source=('Johnson §4.1.3 l. 939 (agents that keep their bundles converge while others negotiate); `table`: '
+                  'l. 941 read literally ([decisions](decisions.md))')),
     Field('termination', 'choice', choices=('auto', 'global', 'local'), default='auto',
           meaning=('`global`: the episode ends when the network is quiet \\| `local`: when every live agent is '
                    'locally converged \\| `auto`: local with pop-up tasks, global otherwise'),
