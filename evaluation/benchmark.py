@@ -153,9 +153,11 @@ def leaderboard(folders: Sequence[Path]) -> str:
         if not path.is_file():
             raise ConfigError(f"--leaderboard: {str(folder)!r} holds no summary.json")
         summaries.append(json.loads(path.read_text(encoding="utf-8")))
-    task_ids = list(dict.fromkeys(t for s in summaries for t in s["tasks"]))
+    seen = {t for s in summaries for t in s["tasks"]}
+    task_ids = [t for t in TASKS if t in seen] + sorted(seen - set(TASKS))        # the suite's order
     names = [t.split("/", 1)[-1].removesuffix(f"-{SUITE}") for t in task_ids]
-    ranked = sorted(summaries, key=lambda s: -s["aggregate"]["iqm"])
+    ran = {id(s): sum("normalised" in s["tasks"].get(t, {}) for t in task_ids) for s in summaries}
+    ranked = sorted(summaries, key=lambda s: (-ran[id(s)], -s["aggregate"]["iqm"]))    # whole-suite rows first
     tables = []
     for figure, first in (("normalised", "IQM [95 % CI]"), ("best_known_share", "mean (tasks run)")):
         lines = [f"| policy | {first} | " + " | ".join(names) + " |", "|---|---|" + "---:|" * len(names)]
@@ -164,6 +166,8 @@ def leaderboard(folders: Sequence[Path]) -> str:
             agg = s["aggregate"]
             lead = (f"{agg['iqm']:.2f} [{agg['iqm_ci95'][0]:.2f}, {agg['iqm_ci95'][1]:.2f}]" if figure == "normalised"
                     else f"{np.mean([v for v in values if v is not None]):.3f}")
+            if ran[id(s)] < len(task_ids):
+                lead += f" ({ran[id(s)]} task{'s' if ran[id(s)] > 1 else ''})"
             cells = ["–" if v is None else f"{v:.{2 if figure == 'normalised' else 3}f}" for v in values]
             lines.append(f"| {s['policy']} | {lead} | " + " | ".join(cells) + " |")
         tables.append("\n".join(lines))
