@@ -21,7 +21,7 @@ class TaskAllocClass(PettingZooClass):
     """The task config holds the env's keyword arguments; the specs are read by BenchMARL's PettingZoo class."""
 
     def get_env_fun(self, num_envs, continuous_actions, seed, device):
-        config = dict(self.config)
+        config = {"episode_stats": False, **self.config}     # TorchRL fixes the info keys at the first reset
         return lambda: PettingZooWrapper(taskalloc_v0.parallel_env(**config), categorical_actions=True,
                                          return_state=True, device=device, seed=seed)
 
