@@ -47,7 +47,7 @@ def play(job: tuple[str, str, int]) -> dict[str, Any]:
     allocation = env.evaluate()
     return {"task": task_id, "policy": name, "seed": seed, "steps": steps, "rounds": allocation.counters.rounds,
             "return": allocation.score / env.reward_scale, "max_cycles": default_limit,
-            "round_bound": env.protocol.max_rounds}
+            "round_bound": env.round_bound}
 
 
 def applies(task_id: str, name: str) -> str | None:
@@ -84,7 +84,7 @@ def measure(task_ids: Sequence[str], policies: Sequence[str], episodes: int | No
                         "mean_steps": float(np.mean(steps)), "max_rounds": max(r["rounds"] for r in mine),
                         "mean_return": float(np.mean(returns)), "min_return": min(returns),
                         "max_return": max(returns), "max_cycles": mine[0]["max_cycles"],
-                        "margin": mine[0]["max_cycles"] / max(steps)})
+                        "round_bound": mine[0]["round_bound"], "margin": mine[0]["max_cycles"] / max(steps)})
     return summary
 
 
@@ -99,6 +99,25 @@ def markdown(summary: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def by_task(summary: Sequence[dict[str, Any]]) -> str:
+    """Per task: T_max, the default limit, the longest episode of a scripted baseline and of a learned policy (in
+    steps and in multiples of T_max), and the smallest margin."""
+    lines = ["| task | T_max | default max_cycles | longest, scripted | longest, learned | smallest margin |",
+             "|:--|--:|--:|--:|--:|--:|"]
+    for task_id in dict.fromkeys(r["task"] for r in summary):
+        rows = [r for r in summary if r["task"] == task_id]
+        bound = rows[0]["round_bound"]
+        cells = []
+        for group in ([r for r in rows if r["policy"] in SCRIPTED], [r for r in rows if r["policy"] not in SCRIPTED]):
+            top = max(group, key=lambda r: r["max_steps"], default=None)
+            cells.append("–" if top is None else
+                         f"{top['max_steps']} ({top['policy'].removeprefix('learned:')}, "
+                         f"{top['max_steps'] / bound:.2f}·T_max)")
+        lines.append(f"| {task_id} | {bound} | {rows[0]['max_cycles']} | {cells[0]} | {cells[1]} | "
+                     f"{min(r['margin'] for r in rows):.1f} |")
+    return "\n".join(lines)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m evaluation.episode_stats", description=__doc__.split("\n")[0])
     parser.add_argument("--tasks", nargs="+", default=[t.removeprefix("taskalloc/").removesuffix("-v0")
@@ -110,6 +129,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     task_ids = [task(name if "/" in name else f"taskalloc/{name}-v0").id for name in args.tasks]
     summary = measure(task_ids, args.policies, args.episodes, args.jobs)
     print(markdown(summary))
+    print()
+    print(by_task(summary))
     worst = min(summary, key=lambda r: r["margin"])
     print(f"\nsmallest margin: {worst['margin']:.1f} ({worst['task']}, {worst['policy']}: {worst['max_steps']} "
           f"steps, default max_cycles {worst['max_cycles']})")

@@ -208,6 +208,12 @@ class TaskAllocEnv(ParallelEnv):
         return self.protocol.scenario
 
     @property
+    def round_bound(self) -> int:
+        """T_max of every episode of this env: the round (tick) bound at the widest network diameter its config
+        allows; ``max_cycles`` defaults to ``STEPS_PER_BOUND_ROUND`` steps per round of it under ``sync``."""
+        return self._max_rounds
+
+    @property
     def reward_scale(self) -> float:
         """The divisor of this episode's rewards (``rewards.episode_scale``): the return is ``score / reward_scale``.
         Under ``total_reward`` it is the instance's, so it is known from ``reset()`` on."""

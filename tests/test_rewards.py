@@ -168,7 +168,6 @@ def test_episode_stats_false_leaves_the_record_out():
 class Eager:
     """Never passes while its mask allows anything else: the last allowed action (a quit before a bid)."""
 
-
     def act(self, observations, infos):
         return {a: int(np.flatnonzero(o["action_mask"])[-1]) for a, o in observations.items()}
 
@@ -187,7 +186,7 @@ def eager_episode(env: TaskAllocEnv, seed: int) -> tuple[int, bool, bool]:
                                                       ("acbba", 1)])
 def test_the_default_step_limit_is_a_multiple_of_the_round_bound(consensus, per_round):
     env = TaskAllocEnv(**SMALL, consensus=consensus)
-    assert env.max_cycles == per_round * env._max_rounds
+    assert env.max_cycles == per_round * env.round_bound
     assert TaskAllocEnv(**SMALL, consensus=consensus, max_cycles=7).max_cycles == 7
     if consensus == "sync":
         assert env.max_cycles < env.step_bound
