@@ -11,14 +11,19 @@ Action space           ``Discrete(1 + 2M)``: 0 pass, 1..M bid on task j−1, M+1
 Observation space      ``Dict(observation=Box(D,) float32, action_mask=Box(0, 1, (A,), int8))``, A = the action
                        space's size (``dtype``)
 State space            ``Box`` of agent/task attributes, every agent's own bids and the round
-Reward                 cooperative, potential-based: every agent gets Δ team score (÷ ``reward_scale``)
+Reward                 cooperative, potential-based: every agent gets Δ team score ÷ the episode's scale
+                       (``reward_scale``: by default the instance's total task reward, so the return is the
+                       share of it earned, at most 1; ``"raw"``: the score itself; ``taskalloc_env.rewards``)
 Termination            the allocation converged: every live agent agrees (no table changed for D + 1 rounds; our
                        stopping rule; under ``acbba``: the network went quiet, or every agent converged locally,
                        Johnson §4.1.3)
-Truncation             the round bound T_max (``max_rounds``), or ``max_cycles`` steps (default: ``step_bound``,
-                       the most steps T_max rounds can take); under ``acbba`` also a quiet network whose agents
-                       disagree after lost messages. Infos carry ``unresolved`` when the stopping test passed
-                       without agreement (the reason)
+Truncation             the round bound T_max (``max_rounds``), or ``max_cycles`` steps (default: 5 · T_max under
+                       ``sync``, T_max when a step is a round or tick; ``max_cycles=env.step_bound``, the most
+                       steps T_max rounds can take, leaves the round bound alone); under ``acbba`` also a quiet
+                       network whose agents disagree after lost messages. Infos carry ``unresolved`` when the
+                       stopping test passed without agreement (the reason)
+Episode record         on the step an agent's episode ends, ``info["episode"]``: ``r`` (return), ``l`` (steps),
+                       ``score``, ``valid_tasks``, ``conflicts``, ``rounds``, ``messages``, ``converged``
 =====================  ==============================================================================
 
 Each step is one decision per agent in the bundle phase of CBGA (thesis §3.2.2, Alg 5): *bid* on a task (inserted
@@ -38,17 +43,22 @@ gains a per-task ``released`` feature.
 
 Constructor arguments: ``scenario`` (a name from ``configs/scenarios``, a YAML path, a
 :class:`~taskalloc_env.config.TaskAllocConfig`, a mapping, or a fixed :class:`~taskalloc_env.scenario.Scenario`),
-``max_cycles`` (steps before truncation; None: ``step_bound``), ``render_mode`` (``ansi``, ``rgb_array``,
+``max_cycles`` (steps before truncation; None: ``STEPS_PER_BOUND_ROUND`` = 5 steps per round of the bound T_max
+under ``sync``, T_max under ``every_step`` and ``acbba``), ``render_mode`` (``ansi``, ``rgb_array``,
 ``human``), ``invalid_action`` (``noop``, the default: an invalid action becomes a pass, flagged in infos; ``raise``:
 bad input raises ``InvalidActionError``), ``dtype`` (``float32``, the default, or ``float64`` observations and state),
-``reward_scale`` (rewards are Δscore / reward_scale), ``render_path`` (where ``human`` saves its figure: at the end of
+``reward_scale`` (``"total_reward"``, the default: rewards are Δscore over the instance's total task reward;
+``"raw"``: Δscore; a number s > 0: Δscore / s; ``env.reward_scale`` is the current episode's divisor),
+``episode_stats`` (True, the default: the episode record in the final infos; False for libraries that fix the info
+keys at the first reset, such as TorchRL), ``render_path`` (where ``human`` saves its figure: at the end of
 every episode and on each ``render()`` call; None shows it in a window, redrawn every step), and any config field
 as a keyword override (``n_agents=10, n_tasks=20, agents_per_task=4, comm_range=None``).
 
 Observation: agent i's own features and, per task, features of *its own* table (marginal gain, L_j, members,
 lowest member bid, group total, displaced bid, in bundle, quit before, rounds since the group changed, equipment
 match, prerequisites met, window, relative position); ``ObservationLayout`` names the columns. The episode
-return equals ``evaluate().score / reward_scale``.
+return equals ``evaluate().score / env.reward_scale``; neither ``reward_scale`` nor ``max_cycles`` changes an
+observation.
 """
 
 from __future__ import annotations
@@ -73,10 +83,21 @@ from taskalloc_env.memory import check_memory
 from taskalloc_env.observation import ObservationBuilder, state_vector
 from taskalloc_env.protocol import Protocol
 from taskalloc_env.render import ansi_table, figure, rgb_array
+from taskalloc_env.rewards import (
+    DEFAULT_REWARD_SCALE,
+    check_reward_scale,
+    episode_record,
+    episode_scale,
+    step_reward,
+)
 from taskalloc_env.scenario import Scenario, generate, scenario_config
 
 INVALID_ACTION_MODES = ("noop", "raise")
 DTYPES = ("float32", "float64")
+# the default step limit of a synchronous episode, in steps per round of the round bound T_max: on every test seed
+# of every suite task no episode of the scripted baselines took more than 1.44 · T_max steps, none of the committed
+# learned policies more than 2.16 · T_max (docs/decisions.md, ``python -m evaluation.episode_stats``)
+STEPS_PER_BOUND_ROUND = 5
 _MISSING = object()                # an agent the action dict leaves out
 
 
@@ -88,8 +109,9 @@ class TaskAllocEnv(ParallelEnv):
 
     def __init__(self, scenario: str | Path | TaskAllocConfig | Mapping[str, Any] | Scenario = "default",
                  max_cycles: int | None = None, render_mode: str | None = None, invalid_action: str = "noop",
-                 reward_scale: float = 1.0, render_path: str | Path | None = None, dtype: str = "float32",
-                 memory_limit_gb: float | None = None, mask_in_infos: bool = False, **overrides: Any) -> None:
+                 reward_scale: str | float = DEFAULT_REWARD_SCALE, render_path: str | Path | None = None,
+                 dtype: str = "float32", memory_limit_gb: float | None = None, mask_in_infos: bool = False,
+                 episode_stats: bool = True, **overrides: Any) -> None:
         if isinstance(scenario, Scenario):
             self.fixed_scenario: Scenario | None = scenario
             self.config = scenario_config(scenario, **overrides)
@@ -108,13 +130,13 @@ class TaskAllocEnv(ParallelEnv):
         if max_cycles is not None and (isinstance(max_cycles, bool) or not isinstance(max_cycles, int)
                                        or max_cycles < 1):
             raise ConfigError(f"max_cycles must be a positive integer or None, got {max_cycles!r}")
-        if isinstance(reward_scale, bool) or not isinstance(reward_scale, (int, float)) \
-                or not 0 < reward_scale < np.inf:
-            raise ConfigError(f"reward_scale must be a finite number > 0, got {reward_scale!r}")
+        self.reward_scale_rule = check_reward_scale(reward_scale)
+        if not isinstance(episode_stats, bool):
+            raise ConfigError(f"episode_stats must be True or False, got {episode_stats!r}")
+        self.episode_stats = episode_stats
         self.render_mode = render_mode
         self.render_path = _checked_render_path(render_path)
         self.invalid_action = invalid_action
-        self.reward_scale = float(reward_scale)
         n, m = self.config.n_agents, self.config.n_tasks
         widest = (int(self.fixed_scenario.task_agents.max()) if self.fixed_scenario is not None
                   else max_required_agents(self.config))
@@ -139,15 +161,17 @@ class TaskAllocEnv(ParallelEnv):
             # the largest diameter any instance can have: 1 fully connected, n − 1 for agents in a line
             diameter = 1 if self.config.comm_range is None else max(1, n - 1)
             self._max_rounds = episode_bound(self.config, m, n, self._max_agents_per_task, diameter)
-        # the most steps T_max rounds can take, so the default never cuts what the round bound lets finish: a sync
-        # round ends when all have passed; before that an agent's steps are its bids (each adds a task to its
-        # bundle; only its own quits, at most one per task, each dropping at most M tasks, make room again: at most
-        # M + M² bids), its quits (at most M) and the pass, (M + 1)² in all; every_step and acbba: a round (tick)
-        # per step. Release actions lift the bound on a sync round's bids (release, re-bid, …): the default then cuts
-        # an episode whose agents never stop doing that
-        per_round = (m + 1) ** 2 if self.config.consensus == "sync" else 1
-        self.step_bound = self._max_rounds * per_round
-        self.max_cycles = max_cycles if max_cycles is not None else self.step_bound
+        # the most steps T_max rounds can take: a sync round ends when all have passed; before that an agent's
+        # steps are its bids (each adds a task to its bundle; only its own quits, at most one per task, each
+        # dropping at most M tasks, make room again: at most M + M² bids), its quits (at most M) and the pass,
+        # (M + 1)² in all; every_step and acbba: a round (tick) per step. Release actions lift the bound on a sync
+        # round's bids (release, re-bid, …): the limit then cuts an episode whose agents never stop doing that
+        sync = self.config.consensus == "sync"
+        self.step_bound = self._max_rounds * ((m + 1) ** 2 if sync else 1)
+        # the default limit: STEPS_PER_BOUND_ROUND steps per round of the bound under sync (a realistic bound that
+        # clears every measured episode), the bound itself when a step is a round (tick)
+        self.max_cycles = max_cycles if max_cycles is not None else \
+            self._max_rounds * (STEPS_PER_BOUND_ROUND if sync else 1)
         builder = ObservationBuilder(probe_protocol, self._max_agents_per_task, self._max_rounds)
         self.observation_layout = builder.layout
         self._observation_space = spaces.Dict({
@@ -187,6 +211,20 @@ class TaskAllocEnv(ParallelEnv):
         return self.protocol.scenario
 
     @property
+    def round_bound(self) -> int:
+        """T_max of every episode of this env: the round (tick) bound at the widest network diameter its config
+        allows; ``max_cycles`` defaults to ``STEPS_PER_BOUND_ROUND`` steps per round of it under ``sync``."""
+        return self._max_rounds
+
+    @property
+    def reward_scale(self) -> float:
+        """The divisor of this episode's rewards (``rewards.episode_scale``): the return is ``score / reward_scale``.
+        Under ``total_reward`` it is the instance's, so it is known from ``reset()`` on."""
+        if self._protocol is None:
+            raise RuntimeError("reward_scale belongs to an episode: call reset() first")
+        return self._reward_scale
+
+    @property
     def np_random(self) -> np.random.Generator:
         return self._np_random
 
@@ -201,7 +239,9 @@ class TaskAllocEnv(ParallelEnv):
         self._builder = ObservationBuilder(self._protocol, self._max_agents_per_task, self._max_rounds)
         self._engine = StepEngine(self._protocol)
         self.agents = [a for a, present in zip(self.possible_agents, self._protocol.alive) if present]  # join_at
+        self._reward_scale = episode_scale(self.reward_scale_rule, self._protocol.model)
         self._last_score = 0.0
+        self._return = 0.0
         self._done = False
         observations = self._observations()
         infos = self._infos({})
@@ -233,6 +273,10 @@ class TaskAllocEnv(ParallelEnv):
         if truncated and protocol.unresolved is not None:     # why the episode ended without convergence
             for info in infos.values():
                 info["unresolved"] = protocol.unresolved
+        if self.episode_stats:                                  # the record of every agent whose episode ends here
+            for a in agents:
+                if terminated or truncated or terminations[a]:
+                    infos[a]["episode"] = episode_record(self._return, self._engine.steps, infos[a])
         if terminated or truncated:
             self._done = True
             self.agents = []
@@ -249,8 +293,9 @@ class TaskAllocEnv(ParallelEnv):
         truncated). The one step of this env and of each instance of the batched env (``vector``)."""
         self._engine.apply(decisions)
         score = self.protocol.score().score
-        reward = (score - self._last_score) / self.reward_scale
+        reward = step_reward(score, self._last_score, self._reward_scale)
         self._last_score = score
+        self._return += reward
         terminated, truncated = self._engine.ended(self.max_cycles)
         return reward, terminated, truncated
 

@@ -307,6 +307,8 @@ def check_converged_allocation(env: TaskAllocEnv, episode: Episode, *, full_comm
     assert math.isclose(alloc.score, ref_score, rel_tol=1e-9, abs_tol=1e-6), (alloc.score, ref_score)
     assert math.isclose(episode.episode_return * env.reward_scale, alloc.score, rel_tol=1e-9, abs_tol=1e-6), \
         f"episode return {episode.episode_return} × scale {env.reward_scale} != score {alloc.score}"
+    if env.reward_scale_rule == "total_reward":          # the score never exceeds the total task reward
+        assert episode.episode_return <= 1.0 + 1e-9, f"return {episode.episode_return} above the ceiling 1"
     for j in alloc.valid_tasks:
         members = alloc.members[j]
         assert len(members) == s.task_agents[j]

@@ -207,12 +207,16 @@ def test_reset_with_the_same_seed_replays_the_instance():
 
 
 # -- episode return (the team score, thesis §5.3.1) --------------------------------------------------------------
-@pytest.mark.parametrize("scale", [1.0, 100.0])
+@pytest.mark.parametrize("scale", ["total_reward", "raw", 100.0])
 def test_episode_return_equals_evaluate_score(scale):
-    trace, alloc = _masked_random_episode({"n_agents": 4, "n_tasks": 6, "agents_per_task": [1, 2],
-                                           "reward_scale": scale}, seed=3)
-    total = sum(next(iter(step[2].values())) for step in trace[1:] if step[2])
-    assert total * scale == pytest.approx(alloc.score, abs=1e-6)
+    env = TaskAllocEnv(n_agents=4, n_tasks=6, agents_per_task=[1, 2], reward_scale=scale)
+    rng = np.random.default_rng(3)
+    obs, _ = env.reset(seed=3)
+    total = 0.0
+    while env.agents:
+        obs, rew, *_ = env.step({a: int(rng.choice(np.flatnonzero(obs[a]["action_mask"]))) for a in env.agents})
+        total += rew["uav_0"]
+    assert total * env.reward_scale == pytest.approx(env.evaluate().score, abs=1e-6)
 
 
 def test_round_bound_truncates():
@@ -228,19 +232,20 @@ def test_round_bound_truncates():
 
 
 @pytest.mark.parametrize("consensus", ["sync", "every_step"])
-def test_the_default_step_limit_never_cuts_a_round_the_bound_allows(consensus):
-    """``max_cycles`` defaults to ``step_bound`` = T_max · (M + 1)² (sync) or T_max (one round per step): no sync
-    round takes more than (M + 1)² steps, even under a random policy that quits and re-bids (``quit_block=none``
-    lets a quit task be re-bid; a quit drops what follows it, which may be bid again)."""
+def test_the_step_bound_never_cuts_a_round_the_round_bound_allows(consensus):
+    """``step_bound`` = T_max · (M + 1)² (sync) or T_max (one round per step), the limit that leaves the round bound
+    alone (``max_cycles=env.step_bound``): no sync round takes more than (M + 1)² steps, even under a random policy
+    that quits and re-bids (``quit_block=none`` lets a quit task be re-bid; a quit drops what follows it, which may
+    be bid again). The default ``max_cycles`` is tests/test_rewards.py's."""
     from taskalloc.policies import make_policy
 
-    assert TaskAllocEnv(max_cycles=7).max_cycles == 7
     longest = 0
     for seed in range(12):
         e = TaskAllocEnv(n_agents=4, n_tasks=5, agents_per_task=[1, 2, 3], task_quitting=True, delta=0,
                          quit_block="none", consensus=consensus)
         per_round = (e.config.n_tasks + 1) ** 2 if consensus == "sync" else 1
-        assert e.max_cycles == e.step_bound == e.unwrapped._max_rounds * per_round
+        assert e.step_bound == e.unwrapped._max_rounds * per_round
+        e.max_cycles = e.step_bound
         policy = make_policy("random")
         obs, infos = e.reset(seed=seed)
         policy.start(e, seed=seed)

@@ -117,7 +117,7 @@ class StableBids:
 @pytest.mark.slow
 @PROPERTY_SETTINGS
 @given(kw=scenario_config(), variant=st.sampled_from(sorted(VARIANTS)), seed=st.integers(0, 2**16),
-       scale=st.sampled_from([1.0, 50.0]))
+       scale=st.sampled_from(["total_reward", "raw", 50.0]))
 def test_every_variant_converges_to_a_valid_conflict_free_allocation(kw, variant, seed, scale):
     policy = VARIANTS[variant]()
     env = make_env(kw, policy, reward_scale=scale)
@@ -130,7 +130,7 @@ def test_every_variant_converges_to_a_valid_conflict_free_allocation(kw, variant
 
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(kw=scenario_config(), variant=st.sampled_from(sorted(VARIANTS)), seed=st.integers(0, 2**16),
-       scale=st.sampled_from([1.0, 50.0]))
+       scale=st.sampled_from(["total_reward", "raw", 50.0]))
 def test_every_variant_converges_fast_subset(kw, variant, seed, scale):
     """The property above on a few examples, for the fast test subset."""
     test_every_variant_converges_to_a_valid_conflict_free_allocation.hypothesis.inner_test(kw, variant, seed, scale)

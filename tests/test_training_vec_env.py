@@ -16,6 +16,7 @@ from sb3_contrib.common.maskable.utils import get_action_masks, is_masking_suppo
 
 from taskalloc.training.vec_env import TaskAllocVecEnv, make_env_fns
 from taskalloc_env.env import InvalidActionError
+from taskalloc_env.rewards import EPISODE_FIGURES
 
 ENV = {"scenario": "train_small", "task_quitting": True, "delta": 1, "reward_scale": 100.0}
 
@@ -107,9 +108,11 @@ def test_episode_end_reports_once_per_copy_and_resets():
             if dones[block].all():
                 first = infos[copy * 4]
                 assert [("episode" in i) for i in infos[block]] == [True, False, False, False]
-                # the episode return is the final team score / reward_scale (potential-based reward)
-                assert first["episode"]["r"] == pytest.approx(first["episode_metrics"]["score"] / 100.0, abs=1e-4)
-                assert returns[block] == pytest.approx(first["episode"]["r"], abs=1e-4)
+                # the env's record (the return is the final team score / reward_scale) and the wall time
+                record = first["episode"]
+                assert set(record) == {"r", "l", "t", *EPISODE_FIGURES}
+                assert record["r"] == pytest.approx(record["score"] / 100.0, abs=1e-9)
+                assert returns[block] == pytest.approx(record["r"], abs=1e-4)
                 assert not first["TimeLimit.truncated"]                     # random play converges here
                 assert obs["observation"][block][:, 5].max() == 0.0         # fresh episode: round feature 0
                 episodes.append(first["episode"])

@@ -19,20 +19,23 @@ from taskalloc.policies.teams import with_teammates
 from taskalloc.training.sb3_policy import as_learned, save_checkpoint
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.observation import ObservationLayout
+from taskalloc_env.rewards import EPISODE_FIGURES
 
 EVAL_COLUMNS = ("timesteps", "wall_time", "score", "score_std", "valid_tasks", "rounds", "messages",
                 "baseline_score", "ratio")
 
 
 class EpisodeMetricsCallback(BaseCallback):
-    """Logs ``episode/<metric>`` means (score, valid tasks, conflicts, rounds, messages) of finished episodes."""
+    """Logs ``episode/<metric>`` means of finished episodes: every figure of the env's episode record
+    (``taskalloc_env.rewards.EPISODE_FIGURES``: score, valid tasks, conflicts, rounds, messages, converged) that SB3's
+    own ``rollout/ep_rew_mean`` and ``ep_len_mean`` (from ``r`` and ``l``) leave out."""
 
     def _on_step(self) -> bool:
         for info in self.locals.get("infos", ()):
-            metrics = info.get("episode_metrics")
-            if metrics:
-                for key, value in metrics.items():
-                    self.logger.record_mean(f"episode/{key}", float(value))
+            record = info.get("episode")
+            if record:
+                for key in EPISODE_FIGURES:
+                    self.logger.record_mean(f"episode/{key}", float(record[key]))
         return True
 
 

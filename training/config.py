@@ -72,13 +72,16 @@ def check_protocol_options(cfg: Any, hint: str = "", what: str = "training") -> 
 
 
 def coerce(cls: type, name: str, value: Any) -> Any:
-    """YAML reads ``1e-3`` as a string and ``1`` as an int; float fields get floats."""
+    """YAML reads ``1e-3`` as a string and ``1`` as an int; float fields get floats (a field that also takes a
+    string keeps a string that is no number: ``reward_scale: raw``)."""
     hint = typing.get_type_hints(cls)[name]
     wants_float = hint is float or float in typing.get_args(hint)
     if wants_float and isinstance(value, (str, int)) and not isinstance(value, bool):
         try:
             return float(value)
         except ValueError:
+            if str in typing.get_args(hint):
+                return value
             raise ConfigError(f"training field {name!r}: got {value!r}; allowed: a number") from None
     return value
 

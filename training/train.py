@@ -55,6 +55,7 @@ from taskalloc.training.vec_env import TaskAllocVecEnv, make_env_fns
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, run_cli
 from taskalloc_env.observation import ObservationLayout
+from taskalloc_env.rewards import check_reward_scale
 
 ALGOS = {"maskable_ppo": (MaskablePPO, TaskMaskablePolicy), "ppo": (PPO, TaskPolicy)}
 
@@ -74,7 +75,8 @@ class TrainConfig:
     env_overrides: dict[str, Any] = dataclasses.field(
         default_factory=lambda: {"task_quitting": True, "delta": 1},
         metadata={"help": "config fields set on top of the scenario, e.g. {task_quitting: true}"})
-    reward_scale: float = opt(100.0, "rewards are the change of the team score divided by this")
+    reward_scale: str | float = opt(100.0, "rewards are the change of the team score divided by this: a number, "
+                                           "total_reward (the instance's total task reward) or raw (1)")
     max_cycles: int | None = opt(200, "steps before an episode is truncated")
     scripted_agents: dict[str, str] = dataclasses.field(
         default_factory=dict, metadata={"help": "agents played by scripted policies, e.g. {uav_0: cbga}"})
@@ -125,6 +127,10 @@ class TrainConfig:
     def check(self) -> None:
         """Bad values raise ``ConfigError`` naming the field and what is allowed."""
         check_types(self)
+        try:
+            check_reward_scale(self.reward_scale)
+        except ConfigError as exc:
+            raise ConfigError(f"training field 'reward_scale': {exc}") from None
         if self.algo not in ALGOS:
             raise ConfigError(f"training field 'algo': got {self.algo!r}; allowed: {' | '.join(sorted(ALGOS))}")
         if self.body not in BODIES:

@@ -13,8 +13,9 @@ SuperSuit's converter lacks with SB3 2.9 (SuperSuit 3.11's ``ConcatVecEnv`` has 
   from the last observations, so no round trip to the copies);
 * ``TimeLimit.truncated`` (truncated and not terminated) and ``terminal_observation`` in the infos of every slot
   of a finished copy; the copy is then reset (all agents of a copy end together);
-* ``episode`` (``r``, ``l``, ``t``) and ``episode_metrics`` (score, valid tasks, conflicts, rounds, messages) in the
-  info of the copy's first slot only, once per episode, so SB3's ``ep_info_buffer`` counts episodes, not agents;
+* ``episode``: the env's record (``r``, ``l``, score, valid tasks, conflicts, rounds, messages, converged;
+  ``taskalloc_env.rewards``) plus the wall time ``t``, in the info of the copy's first slot only, once per episode,
+  so SB3's ``ep_info_buffer`` counts episodes, not agents (the env gives every agent one);
 * mixed teams: agents in ``scripted_agents`` are played by scripted policies inside the copy and get no slot;
 * copies run in this process (``n_procs=0``, like ``DummyVecEnv``) or spread over ``n_procs`` subprocesses.
 
@@ -52,8 +53,6 @@ class EnvCopy:
         self._rng = np.random.default_rng()
         self._obs: dict[str, Any] = {}
         self._infos: dict[str, Any] = {}
-        self._return = 0.0
-        self._length = 0
         self._t0 = time.perf_counter()
 
     def spaces(self) -> tuple[spaces.Space, spaces.Space]:
@@ -67,7 +66,7 @@ class EnvCopy:
         self._obs, self._infos = self.env.reset(seed=seed, options=options)
         if self.teammates is not None:
             self.teammates.start(self.env, int(self._rng.integers(2**31)))
-        self._return, self._length, self._t0 = 0.0, 0, time.perf_counter()
+        self._t0 = time.perf_counter()
         return self._stack(self._obs), [dict(self._infos.get(a, {})) for a in self.learned]
 
     def step(self, actions: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, list[dict]]:
@@ -78,23 +77,21 @@ class EnvCopy:
         obs, rewards, terminations, truncations, infos = self.env.step(joint)
         self._obs, self._infos = obs, infos
         reward = np.array([rewards[a] for a in self.learned], dtype=np.float32)
-        self._return += float(reward[0])
-        self._length += 1
         terminated = all(terminations.values())
         truncated = all(truncations.values())
         done = terminated or truncated or not self.env.agents
         slot_infos = [dict(infos.get(a, {})) for a in self.learned]
+        for info in slot_infos:                 # an agent's own record (a failed agent's too): one per episode below
+            info.pop("episode", None)
         if not done:
             return self._stack(obs), reward, np.zeros(len(self.learned), dtype=bool), slot_infos
         for agent, info in zip(self.learned, slot_infos):
             info["terminal_observation"] = obs[agent]
             info["TimeLimit.truncated"] = truncated and not terminated
-        first = infos[self.learned[0]]
-        slot_infos[0]["episode"] = {"r": self._return, "l": self._length,
-                                    "t": round(time.perf_counter() - self._t0, 6)}
-        slot_infos[0]["episode_metrics"] = {"score": first["score"], "valid_tasks": first["valid_tasks"],
-                                            "conflicts": first["conflicts"], "rounds": first["round"],
-                                            "messages": first["messages"]}
+        # every agent still in the episode carries the same record (none with episode_stats=False)
+        record = next((info["episode"] for info in infos.values() if "episode" in info), None)
+        if record is not None:
+            slot_infos[0]["episode"] = {**record, "t": round(time.perf_counter() - self._t0, 6)}
         new_obs, _ = self.reset()
         return new_obs, reward, np.ones(len(self.learned), dtype=bool), slot_infos
 

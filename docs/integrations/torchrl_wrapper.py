@@ -10,8 +10,9 @@ from taskalloc_env import taskalloc_v0
 
 
 def make_env(seed: int = 0) -> PettingZooWrapper:
-    return PettingZooWrapper(taskalloc_v0.parallel_env(scenario="train_small"), use_mask=True, return_state=True,
-                             categorical_actions=True, seed=seed)
+    # TorchRL fixes the info keys at the first reset: no episode record in the final infos (RewardSum counts returns)
+    env = taskalloc_v0.parallel_env(scenario="train_small", episode_stats=False)
+    return PettingZooWrapper(env, use_mask=True, return_state=True, categorical_actions=True, seed=seed)
 
 
 def masked_random(td):

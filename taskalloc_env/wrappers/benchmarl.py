@@ -38,7 +38,7 @@ class TaskAllocClass(PettingZooClass):
     class, which reads them off the wrapped env."""
 
     def get_env_fun(self, num_envs: int, continuous_actions: bool, seed: int | None, device: Any):
-        config = dict(self.config)
+        config = {"episode_stats": False, **self.config}     # TorchRL fixes the info keys at the first reset
         return lambda: PettingZooWrapper(taskalloc_v0.parallel_env(**config), categorical_actions=True,
                                          return_state=True, device=device, seed=seed)
 
