@@ -3,9 +3,10 @@
 Slot ``k * N + i`` is agent i of instance k, so one policy acts for every agent of every instance (parameter sharing,
 as ``vec_env.TaskAllocVecEnv`` over env copies). The batch runs in same-step autoreset mode, SB3's convention: an
 instance that ends is reset within the step, and every slot of it gets ``terminal_observation`` and
-``TimeLimit.truncated`` (truncated and not terminated); its first slot gets ``episode`` (``r``, ``l``, ``t``) and
-``episode_metrics`` (score, valid tasks, conflicts, rounds, messages), so SB3's ``ep_info_buffer`` counts episodes,
-not agents. ``seed(s)`` starts instance k from ``s + k`` at the next ``reset()``; ``action_masks()`` (and
+``TimeLimit.truncated`` (truncated and not terminated); its first slot gets ``episode``, the env's record (``r``,
+``l``, score, valid tasks, conflicts, rounds, messages, converged; ``taskalloc_env.rewards``) plus the wall time
+``t``, as ``TaskAllocVecEnv`` gives it, so SB3's ``ep_info_buffer`` counts episodes, not agents. ``seed(s)``
+starts instance k from ``s + k`` at the next ``reset()``; ``action_masks()`` (and
 ``env_method("action_masks")``, which sb3-contrib's ``MaskablePPO`` calls) returns the masks of the last
 observations::
 
@@ -25,7 +26,8 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from taskalloc_env.errors import ConfigError
-from taskalloc_env.vector import TaskAllocVectorEnv
+from taskalloc_env.rewards import episode_record
+from taskalloc_env.vector import INFO_KEYS, TaskAllocVectorEnv
 
 MASK_METHOD = "action_masks"
 
@@ -89,12 +91,9 @@ class BatchedVecEnv(VecEnv):
                         "terminal_observation": {"observation": final["observation"][k, i],
                                                  "action_mask": final["action_mask"][k, i]},
                         "TimeLimit.truncated": cut}
-                slot_infos[k * n]["episode"] = {"r": float(self._returns[k]), "l": int(self._lengths[k]),
-                                                "t": round(now - self._starts[k], 6)}
-                slot_infos[k * n]["episode_metrics"] = {
-                    "score": float(final_info["score"][k]), "valid_tasks": int(final_info["valid_tasks"][k]),
-                    "conflicts": int(final_info["conflicts"][k]), "rounds": int(final_info["round"][k]),
-                    "messages": int(final_info["messages"][k])}
+                figures = {key: final_info[key][k].item() for key in INFO_KEYS}
+                slot_infos[k * n]["episode"] = {**episode_record(float(self._returns[k]), int(self._lengths[k]),
+                                                                 figures), "t": round(now - self._starts[k], 6)}
                 self._returns[k], self._lengths[k], self._starts[k] = 0.0, 0, now
         return (self._slots(obs), rewards.reshape(-1).astype(np.float32), np.repeat(done, n), slot_infos)
 

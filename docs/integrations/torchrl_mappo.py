@@ -15,7 +15,7 @@ from taskalloc_env.wrappers.torchrl import TaskAllocTorchRLEnv
 def main(iterations: int = 2, instances: int = 16, steps: int = 32, seed: int = 0) -> dict[str, float]:
     torch.set_num_threads(1)
     torch.manual_seed(seed)
-    env = TaskAllocTorchRLEnv(instances, scenario="train_small", reward_scale=100.0)   # rewards of order one
+    env = TaskAllocTorchRLEnv(instances, scenario="train_small", reward_scale=100.0)   # as taskalloc train scales
     env.set_seed(seed)
     n, d = env.venv.n_agents, env.observation_spec["uav", "observation"].shape[-1]
     a = env.action_spec["uav", "action"].space.n
