@@ -17,7 +17,8 @@ release to its **assignment** (the first tick its final holder, the agent with t
 it) and until it is **settled** (the tick from which that agent holds it for good: a later replan or outbid release
 that drops it, and the re-bid after, count). *Sound* counts the episodes that converged conflict-free with every
 agent agreeing. A replan arm is paired with ACBBA seed by seed (``taskalloc.evaluation.stats.paired``); the times
-are compared over the pop-ups both arms assign (each episode's mean over them). The replans themselves: how many, on
+are compared over the pop-ups both arms assign (each episode's mean over them; the median over all those pop-ups in
+brackets). The replans themselves: how many, on
 how many agents per pop-up, how many replanners win their pop-up, how often the pop-up enters the rebuilt bundle
 ahead of every displaced task (the trigger's prediction; a task outside the bundle may come first, or a better bid
 heard meanwhile take the pop-up), and where the dropped tasks end.
@@ -168,9 +169,12 @@ def tables(rows: Sequence[dict[str, Any]]) -> tuple[str, str]:
                 means = np.array([common_mean(r[metric], b[metric]) for r, b in zip(rs, base)])
                 means = means[~np.isnan(means).any(axis=1)]
                 mine, theirs = means[:, 0], means[:, 1]
+                pooled = np.concatenate([r[metric][~np.isnan(r[metric]) & ~np.isnan(b[metric])]
+                                         for r, b in zip(rs, base)])
+                cells.append(f"{format_mean_sd(mine, digits)} (median {np.median(pooled):.0f})")
             else:
                 mine, theirs = (np.array([r[metric] for r in x], dtype=float) for x in (rs, base))
-            cells.append(format_mean_sd(mine, digits))
+                cells.append(format_mean_sd(mine, digits))
             pc = paired(mine, theirs)
             cells.append("–" if arm == "ACBBA" else
                          f"{pc.mean_diff:+.{digits}f} [{pc.ci95[0]:+.{digits}f}, {pc.ci95[1]:+.{digits}f}], "
