@@ -56,8 +56,8 @@ METRICS = ("score", "valid_tasks", "conflicts", "rounds", "messages", "comm_step
            "data_per_assignment", "data_per_agent_per_assignment", "conflicting_bids_per_agent", "dropped_agents",
            "connected", "fully_connected", "completion", "score_per_task", "workload_gini", "max_travel",
            "max_agent_messages")
-# policies of single-agent tasks only (every L_j = 1): CBBA, ACBBA, CBAA, PI
-SINGLE_AGENT_TASKS = ("cbba", "acbba", "cbaa", "pi")
+# policies of single-agent tasks only (every L_j = 1): CBBA, ACBBA (and its replan), CBAA, PI
+SINGLE_AGENT_TASKS = ("cbba", "acbba", "acbba+replan", "cbaa", "pi")
 SUMMARY_FIELDS = ("score", "valid_tasks", "rounds", "messages")
 PROTOCOL_METRICS = ("rounds", "messages", "comm_steps", "rounds_to_agreement", "comm_steps_to_agreement",
                     "invalid_actions", "informative_messages", "data_items", "quits", "quits_seen", "messages_lost",

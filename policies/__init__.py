@@ -8,12 +8,14 @@ from taskalloc.policies.centralised import exact, sgama
 from taskalloc.policies.local_search import local_search
 from taskalloc.policies.pi import PIPolicy
 from taskalloc.policies.registry import POLICY_NAMES, make_policy, register_checkpoint_loader, register_policy
+from taskalloc.policies.replan import AsyncReplanPolicy
 from taskalloc.policies.rollout import rollout
 from taskalloc.policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
 
 __all__ = [
     "POLICY_NAMES",
     "ACBBAPolicy",
+    "AsyncReplanPolicy",
     "CBAAPolicy",
     "CBBAPolicy",
     "CBGAPolicy",

@@ -23,6 +23,7 @@ from taskalloc.policies.base import Policy
 from taskalloc.policies.cbaa import CBAAPolicy
 from taskalloc.policies.checkpoint import Checkpoint, CheckpointError
 from taskalloc.policies.pi import PIPolicy
+from taskalloc.policies.replan import AsyncReplanPolicy
 from taskalloc.policies.scripted import ACBBAPolicy, CBBAPolicy, CBGAPolicy, PassPolicy, RandomPolicy
 
 FACTORIES: dict[str, Callable[..., Policy]] = {}
@@ -50,7 +51,8 @@ def register_policy(name: str, factory: Callable[..., Policy], privileged: bool 
 
 
 for _name, _factory in (("random", RandomPolicy), ("pass", PassPolicy), ("cbba", CBBAPolicy), ("acbba", ACBBAPolicy),
-                        ("cbaa", CBAAPolicy), ("pi", PIPolicy), ("cbga", CBGAPolicy),
+                        ("acbba+replan", AsyncReplanPolicy), ("cbaa", CBAAPolicy), ("pi", PIPolicy),
+                        ("cbga", CBGAPolicy),
                         ("cbga+tq", lambda **kw: CBGAPolicy(task_quitting=True, **kw)),
                         ("cbga+tb", lambda **kw: CBGAPolicy(team_bidding=True, **kw)),
                         ("cbgabi", lambda **kw: CBGAPolicy(team_bidding=True, task_quitting=True, **kw))):
@@ -88,9 +90,9 @@ def parse_name(name: str) -> tuple[str, dict[str, int]]:
 
 
 def make_policy(name: str, **kwargs) -> Policy:
-    """``random``, ``pass``, ``cbba``, ``acbba``, ``cbaa``, ``pi``, ``cbga``, ``cbga+tq``, ``cbga+tb``, ``cbgabi``
-    (``cbga+tq:delta=3``, ``cbgabi:delta=3``: with the quit threshold δ), a registered plug-in, or
-    ``learned:<checkpoint>`` (a trained policy, loaded by the loader its checkpoint's meta selects)."""
+    """``random``, ``pass``, ``cbba``, ``acbba``, ``acbba+replan``, ``cbaa``, ``pi``, ``cbga``, ``cbga+tq``,
+    ``cbga+tb``, ``cbgabi`` (``cbga+tq:delta=3``, ``cbgabi:delta=3``: with the quit threshold δ), a registered
+    plug-in, or ``learned:<checkpoint>`` (a trained policy, loaded by the loader its checkpoint's meta selects)."""
     if name.lower().startswith("learned:"):
         return load_learned(name.split(":", 1)[1], **kwargs)
     if ":" in name and name.split(":", 1)[0].lower() not in FACTORIES:      # a user's policy: mypkg.mymodule:MyPolicy
