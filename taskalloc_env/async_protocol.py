@@ -50,6 +50,8 @@ every live agent (``termination``; ``auto``: local with pop-up tasks). T_max (``
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from taskalloc_env.async_consensus import Message, Times, compose, listen
@@ -121,16 +123,16 @@ class AsyncProtocol(Protocol):
 
     def quit(self, agent: int, task: int) -> list[int]:
         """Protocol.quit; the withdrawn entries go out with the current time."""
-        held = self.knowledge.own_bids()[agent] > 0
-        released = super().quit(agent, task)
-        self._withdrawn(agent, [task, *released], held)
-        self._settle(agent)
-        return released
+        return self._giving_up(agent, task, super().quit)
 
     def release(self, agent: int, task: int) -> list[int]:
         """Protocol.release; the withdrawn entries go out with the current time, as a quit's do."""
+        return self._giving_up(agent, task, super().release)
+
+    def _giving_up(self, agent: int, task: int, give_up: Callable[[int, int], list[int]]) -> list[int]:
+        """``give_up(agent, task)`` (the synchronous quit or release), then send what it withdrew, stamped now."""
         held = self.knowledge.own_bids()[agent] > 0
-        released = super().release(agent, task)
+        released = give_up(agent, task)
         self._withdrawn(agent, [task, *released], held)
         self._settle(agent)
         return released
