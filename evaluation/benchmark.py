@@ -31,6 +31,7 @@ from taskalloc.evaluation import benchmark_stats as bstats
 from taskalloc.evaluation.episodes import default_jobs, solver_name
 from taskalloc.evaluation.suite_episodes import ROW_FIELDS, play_task
 from taskalloc.evaluation.suite_reference import load_reference, means, write_reference
+from taskalloc.evaluation.training_cost import training_cost
 from taskalloc_env.errors import ConfigError, InvalidActionError
 from taskalloc_env.suite import SUITE, TASKS, cards, task
 
@@ -105,6 +106,9 @@ def run(policies: Sequence[str], task_ids: Sequence[str], episodes: int | None =
         raise ConfigError(f"{label} applies to none of the tasks {list(task_ids)}")
     summary = {"suite": SUITE, "policy": label, "runs": list(policies), "invalid_action": invalid_action,
                "tasks": tasks, "aggregate": bstats.aggregate(bstats.aggregate_matrix(normalised))}
+    costs = [training_cost(p) for p in policies]
+    if any(costs):
+        summary["training"] = costs
     summary["marl_eval"] = bstats.marl_eval_json(label, scores, normalised)
     return summary, rows
 
@@ -171,8 +175,35 @@ def leaderboard(folders: Sequence[Path]) -> str:
             cells = ["–" if v is None else f"{v:.{2 if figure == 'normalised' else 3}f}" for v in values]
             lines.append(f"| {s['policy']} | {lead} | " + " | ".join(cells) + " |")
         tables.append("\n".join(lines))
-    return ("Normalised score (random 0, normaliser 1):\n\n" + tables[0]
+    text = ("Normalised score (random 0, normaliser 1):\n\n" + tables[0]
             + "\n\nShare of the best known (exact optimum on Small, LNS elsewhere):\n\n" + tables[1] + "\n")
+    trained = [s for s in ranked if s.get("training")]
+    if trained:
+        text += ("\nLearned rows across their training runs: the cost of one run (mean over the runs, from each "
+                 "checkpoint's summary.yaml) and, per task, the normalised score's mean with its 95 % t-interval over "
+                 "the runs:\n\n" + _training_table(trained, task_ids, names) + "\n")
+    return text
+
+
+def _training_table(summaries: Sequence[dict[str, Any]], task_ids: Sequence[str], names: Sequence[str]) -> str:
+    """One row per learned method: runs, agent steps, CPU and wall minutes per run, then mean [lo, hi] per task."""
+    lines = ["| policy | runs | agent steps per run | CPU min per run (wall) | " + " | ".join(names) + " |",
+             "|---|---:|---:|---:|" + "---:|" * len(names)]
+    for s in summaries:
+        costs = [c for c in s["training"] if c]
+        steps = sorted({c["agent_steps"] for c in costs if c.get("agent_steps") is not None})
+        cpus = [c["cpu_seconds"] / 60 for c in costs if c.get("cpu_seconds") is not None]
+        walls = [c["wall_seconds"] / 60 for c in costs if c.get("wall_seconds") is not None]
+        cells = []
+        for t in task_ids:
+            figures = s["tasks"].get(t, {})
+            runs = figures.get("ci95_runs")
+            cells.append("–" if "normalised" not in figures else f"{figures['normalised']:.2f}" if runs is None
+                         else f"{figures['normalised']:.2f} [{runs[0]:.2f}, {runs[1]:.2f}]")
+        step_text = ", ".join(f"{v:,}" for v in steps) or "–"
+        cost_text = (f"{np.mean(cpus):.1f}" if cpus else "–") + (f" ({np.mean(walls):.1f})" if walls else "")
+        lines.append(f"| {s['policy']} | {len(s['runs'])} | {step_text} | {cost_text} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
 
 
 def write(out: Path, summary: dict[str, Any], rows: Sequence[dict[str, Any]]) -> None:

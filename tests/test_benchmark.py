@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pettingzoo
@@ -309,3 +311,46 @@ def test_unknown_suite_and_bad_episodes_are_usage_errors(capsys):
     assert "unknown suite" in capsys.readouterr().err
     assert cli(["benchmark", "--policy", "random", "--out", "x", "--episodes", "0"]) == 2
     assert "--episodes" in capsys.readouterr().err
+
+
+def test_learned_runs_carry_their_training_cost_into_the_leaderboard(tmp_path):
+    from taskalloc.evaluation.training_cost import training_cost
+    assert training_cost("cbgabi") is None
+    cost = training_cost("learned:mappo_small_pooling_1m")        # MAPPO's summary.yaml keeps ``steps``
+    assert cost["agent_steps"] == 1_003_520 and cost["wall_seconds"] == pytest.approx(463.1)
+    assert training_cost("learned:train_small")["agent_steps"] == 1_003_520      # SB3's keeps ``ppo.steps``
+    runs = ["learned:mappo_small_pooling_1m", "learned:mappo_small_pooling_1m"]
+    summary, rows = benchmark.run(runs, ["taskalloc/Small-v0"], episodes=2, label="two runs")
+    assert summary["training"] == [cost, cost]
+    benchmark.write(tmp_path / "learned", summary, rows)
+    summary, rows = benchmark.run(["cbgabi"], ["taskalloc/Small-v0"], episodes=2)
+    assert "training" not in summary
+    benchmark.write(tmp_path / "cbgabi", summary, rows)
+    text = benchmark.leaderboard([tmp_path / "learned", tmp_path / "cbgabi"])
+    row = next(line for line in text.splitlines() if line.startswith("| two runs | 2 |"))
+    assert "1,003,520" in row and "7.6 (7.7)" in row            # CPU minutes (wall minutes)
+    assert text.count("| CBGABI |") == 2                    # in the two score tables, not in the training one
+
+
+LEADERBOARD = Path(__file__).resolve().parents[1] / "results" / "benchmark" / "v0"
+
+
+def _learned_rows() -> list[tuple[str, int, str]]:
+    """(folder, run, policy) of every learned run in the committed leaderboard."""
+    rows = []
+    for path in sorted(LEADERBOARD.glob("*/summary.json")):
+        runs = json.loads(path.read_text(encoding="utf-8"))["runs"]
+        rows += [(path.parent.name, k, p) for k, p in enumerate(runs) if p.startswith("learned:")]
+    return rows
+
+
+@pytest.mark.parametrize("folder,run,policy", _learned_rows())
+def test_committed_leaderboard_models_load_by_name_and_reproduce_their_scores(folder, run, policy):
+    """Each learned run of docs/benchmark.md loads by name and replays its first recorded test episodes exactly."""
+    from taskalloc.evaluation.suite_episodes import play
+    with (LEADERBOARD / folder / "episodes.csv").open(encoding="utf-8") as handle:
+        recorded = [r for r in csv.DictReader(handle) if int(r["run"]) == run and r["task"] == "taskalloc/Small-v0"]
+    assert recorded, f"{folder}: no Small episodes for run {run}"
+    for row in recorded[:2]:
+        replay = play((policy, row["task"], int(row["seed"]), "noop"))
+        assert replay["score"] == float(row["score"]) and replay["instance"] == row["instance"]
