@@ -13,9 +13,9 @@ the logits are ``[pass, bid_0 … bid_{M−1}, quit_0 … quit_{M−1}]``, or wi
   let the tokens see each other (a Transformer encoder without positional encoding, Vaswani et al. 2017, so the
   tokens form a set as in the Set Transformer, Lee et al. 2019); the agent's own features, embedded, are the query
   of one attention read-out over the tokens, which gives the context. Each token with the context gives that
-  task's bid and quit logits, the context the pass logit. Like ``pooling``, no weight depends on M or N; unlike
-  it, a task's logits can depend on every other task (which tasks compete for the same agents, which groups are
-  nearly complete), not only through a mean and a max.
+  task's bid and quit (and release) logits, the context the pass logit. Like ``pooling``, no weight depends on M
+  or N; unlike it, a task's logits can depend on every other task (which tasks compete for the same agents, which
+  groups are nearly complete), not only through a mean and a max.
 * ``mlp``: a plain MLP from the flat observation to the 1 + 2M (or 1 + 3M) logits (fixed M).
 
 ``NETWORKS`` names every class a checkpoint may ask for; each takes only integer sizes, so a checkpoint's

@@ -263,5 +263,5 @@ def test_a_learned_policy_refuses_an_environment_with_release_actions():
     policy = make_policy("learned:train_small")
     env = TaskAllocEnv("train_small", release_actions=True, **policy.env_overrides)
     env.reset(seed=0)
-    with pytest.raises(ValueError, match="1 \\+ 2M layout .* has release actions: build it without release_actions"):
+    with pytest.raises(ValueError, match=r"1 \+ 2M layout .* has release actions: build it without release_actions"):
         policy.start(env, 0)
