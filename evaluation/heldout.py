@@ -11,7 +11,7 @@ of the table; one that loads but does not fit the scenario's size is skipped wit
 ``docs/learning.md``, with several training seeds per configuration, come from ``taskalloc.evaluation.learning_report``.
 Each policy runs in an environment built with its ``env_overrides``; seed s is the same instance for every row (the
 instance is drawn at ``reset(seed=s)`` before any policy acts). Learned policies act greedily: the most likely kind of
-action (pass, bid or quit), then its most likely action (``taskalloc.policies.learned.greedy_actions``).
+action (pass, bid, quit or release), then its most likely action (``taskalloc.policies.learned.greedy_actions``).
 """
 
 from __future__ import annotations

@@ -5,7 +5,9 @@ A checkpoint is two files with one stem, ``<stem>.json`` and ``<stem>.safetensor
 * the JSON names the actor class (one of ``taskalloc.policies.networks.NETWORKS``) and its integer sizes, the
 observation
   features it was trained on (checked against the environment's layout before acting), the protocol options the
-  policy needs from the environment (``env_overrides``) and free-form metadata (plain JSON values only);
+  policy needs from the environment (``env_overrides``) and free-form metadata (plain JSON values only). An actor
+  with release logits (``kinds: 3``) goes with ``release_actions: true`` in ``env_overrides`` and one without them
+  (``kinds: 2``, the default of a config that does not name it) without: both ``save`` and ``load`` check it;
 * the safetensors file holds the actor's weights, tensors only.
 
 Loading parses JSON and tensors, builds a known class from integers and loads the weights strictly; nothing in the
@@ -80,6 +82,7 @@ def save(stem: str | Path, actor: Any, own_features: Sequence[str], task_feature
     if unknown:
         raise CheckpointError(f"env_overrides {unknown} are not options a policy plays by "
                               f"({', '.join(POLICY_OPTIONS)})")
+    check_release(actor, env_overrides, type(actor).__name__)
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     spec = {"format": FORMAT, "version": VERSION,
@@ -235,10 +238,21 @@ def _build(spec: Mapping[str, Any], weights: Mapping[str, Any], where: str) -> C
     if not isinstance(overrides, dict) or set(overrides) - set(POLICY_OPTIONS):
         raise CheckpointError(f"{where}: env_overrides {overrides!r} may only set the options a policy plays by: "
                               f"{', '.join(POLICY_OPTIONS)}")
+    check_release(actor, overrides, where)
     meta = spec.get("meta") or {}
     if not isinstance(meta, dict):
         raise CheckpointError(f"{where}: meta must be a mapping")
     return Checkpoint(actor, network["class"], tuple(own), tuple(task), dict(overrides), meta)
+
+
+def check_release(actor: Any, env_overrides: Mapping[str, Any], where: str) -> None:
+    """An actor with release logits (``kinds=3``) needs ``release_actions: true`` in its ``env_overrides``, one
+    without them must not have it (so that ``learned:<name>`` builds the environment it acts in)."""
+    kinds = getattr(actor, "kinds", None)
+    release = bool(env_overrides.get("release_actions", False))
+    if kinds is not None and (kinds == 3) != release:
+        raise CheckpointError(f"{where}: a {actor.name} actor with kinds={kinds} goes with release_actions "
+                              f"{'true' if kinds == 3 else 'false'} in env_overrides, got {env_overrides!r}")
 
 
 def _names(value: Any) -> bool:
@@ -304,13 +318,15 @@ def _from_sb3(policy_kwargs: Any, state: Mapping[str, Any], taskalloc: Any, wher
         if body == "pooling":
             task_size = int(kwargs.get("task_size", len(TASK_FEATURES)))
             own_size = int(actor_state["actor.encode.0.weight"].shape[1]) - task_size
-            config = {"own_size": own_size, "task_size": task_size, "hidden": int(hidden)}
+            config = {"own_size": own_size, "task_size": task_size, "hidden": int(hidden),
+                      "kinds": int(kwargs.get("kinds", 2))}
             network, n_equipment = PoolingActor.name, own_size - len(OWN_FEATURES)
         elif body == "mlp":
             first, last = actor_state["actor.0.weight"], actor_state["actor.4.weight"]
             config = {"obs_size": int(first.shape[1]), "n_actions": int(last.shape[0]), "hidden": int(hidden)}
             network = MlpActor.name
-            n_equipment = int(first.shape[1]) - len(OWN_FEATURES) - (int(last.shape[0]) - 1) // 2 * len(TASK_FEATURES)
+            n_tasks = (int(last.shape[0]) - 1) // int(kwargs.get("kinds", 2))
+            n_equipment = int(first.shape[1]) - len(OWN_FEATURES) - n_tasks * len(TASK_FEATURES)
         else:
             raise CheckpointError(f"{where}: unknown body {body!r} in policy_kwargs")
     except KeyError as exc:

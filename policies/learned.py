@@ -4,14 +4,16 @@
 weights, nothing executable): a committed model by name (``train_small``, from ``models/``), a checkpoint's
 ``.json`` or stem, or a run folder holding ``model.json``. Every agent acts from its own observation with the shared
 weights (parameter sharing); the action is greedy (``deterministic=True``: the most likely kind of action — pass,
-bid or quit — then the most likely action of that kind, see ``greedy_actions``) or a sample. The pooling network
-has no weight tied to the number of tasks, so a checkpoint trained on ``train_small`` also runs on larger scenarios.
-It also runs where the environment adds optional task features it never saw (``member_silence`` on a faulty
+bid, quit or release — then the most likely action of that kind, see ``greedy_actions``) or a sample. The pooling
+network has no weight tied to the number of tasks, so a checkpoint trained on ``train_small`` also runs on larger
+scenarios. It also runs where the environment adds optional task features it never saw (``member_silence`` on a faulty
 network, ``released`` with pop-up tasks, ``sooner_agents`` and ``nearest_other`` with ``team_features``): the
 actor reads its own features, selected by name (``feature_columns``).
 
 ``env_overrides`` are the protocol options the policy was trained with (e.g. ``task_quitting=True, delta=1`` so it
-can quit tasks as CBGABI does); runners build the environment with them.
+can quit tasks as CBGABI does); runners build the environment with them. An actor with release logits (``kinds=3``,
+``taskalloc.policies.networks``) is trained with ``release_actions=True``, which its checkpoint's ``env_overrides``
+carry; it plays only where the environment has release actions, and an actor without them only where it has none.
 """
 
 from __future__ import annotations
@@ -25,7 +27,16 @@ import numpy as np
 from taskalloc.policies.base import Policy, stack_observations
 from taskalloc.policies.checkpoint import Checkpoint, CheckpointError, load
 from taskalloc_env import resources
-from taskalloc_env.actions import PASS, ActionKind, bid_columns, encode_bid, encode_quit, quit_columns
+from taskalloc_env.actions import (
+    PASS,
+    bid_columns,
+    encode_bid,
+    encode_quit,
+    encode_release,
+    n_actions,
+    quit_columns,
+    release_columns,
+)
 from taskalloc_env.observation import FAULT_FEATURES, POPUP_FEATURES, TEAM_FEATURES, ObservationLayout
 
 # task features the environment adds only in some modes (a faulty network, pop-up tasks, team_features): a
@@ -108,9 +119,6 @@ class LearnedPolicy(Policy):
 
     def start(self, env: Any, seed: int | None = None) -> None:
         super().start(env, seed)
-        if self.env.config.release_actions:
-            raise ValueError(f"{self.name} acts in the 1 + 2M layout (pass, bids, quits); its actor has no release "
-                             "actions: build the environment without release_actions")
         layout = self.layout
         columns = feature_columns(layout, self.own_features, self.task_features)
         if columns is False:
@@ -122,6 +130,12 @@ class LearnedPolicy(Policy):
         if not self.actor.fits(len(self.own_features), len(self.task_features), layout.n_tasks):
             raise ValueError(f"{self.name} ({type(self.actor).__name__} {self.actor.config()}) does not fit "
                              f"{layout.n_tasks} tasks (a plain MLP is tied to the number of tasks it was trained on)")
+        release = bool(self.env.config.release_actions)
+        if self.actor.action_width(layout.n_tasks) != n_actions(layout.n_tasks, release):
+            raise ValueError(f"{self.name} acts in the {'1 + 2M' if release else '1 + 3M'} layout (pass, bids, quits"
+                             f"{'' if release else ', releases'}); this environment has "
+                             f"{'' if release else 'no '}release actions: build it "
+                             f"{'without' if release else 'with'} release_actions (the checkpoint's env_overrides)")
         self.rng = np.random.default_rng(seed)
 
     def act(self, observations: Mapping[str, Mapping[str, np.ndarray]],
@@ -145,25 +159,26 @@ class LearnedPolicy(Policy):
         probs = np.exp(logits - logits.max(axis=1, keepdims=True))
         probs /= probs.sum(axis=1, keepdims=True)
         if self.deterministic:
-            return greedy_actions(logits, probs)
+            return greedy_actions(logits, probs, (obs.shape[1] - len(self.own_features)) // len(self.task_features))
         return np.array([self.rng.choice(len(p), p=p) for p in probs])
 
 
-def greedy_actions(logits: np.ndarray, probs: np.ndarray) -> np.ndarray:
-    """The most likely kind of action (pass, bid, quit: summed probabilities), then its most likely action.
+def greedy_actions(logits: np.ndarray, probs: np.ndarray, n_tasks: int) -> np.ndarray:
+    """The most likely kind of action (pass, bid, quit, release: summed probabilities), then its most likely action.
 
     A plain arg-max compares the pass action with each single bid; early in training, when the probability of
     bidding is spread over several tasks, it passes although bidding is far more likely, and a team whose agents
     all pass ends the episode with nothing. Grouping first removes that failure; for a trained, confident policy
-    the two rules agree.
+    the two rules agree. The logits are (B, 1 + 2M), or (B, 1 + 3M) with release actions.
     """
-    m = (logits.shape[1] - 1) // 2
-    bids, quits = bid_columns(m), quit_columns(m)
-    kinds = np.stack([probs[:, PASS], probs[:, bids].sum(axis=1), probs[:, quits].sum(axis=1)], axis=1)
+    m = n_tasks
+    groups = [(bid_columns(m), encode_bid), (quit_columns(m), lambda j: encode_quit(j, m))]
+    if logits.shape[1] == n_actions(m, release=True):
+        groups.append((release_columns(m), lambda j: encode_release(j, m)))
+    kinds = np.stack([probs[:, PASS], *(probs[:, cols].sum(axis=1) for cols, _ in groups)], axis=1)
     kind = kinds.argmax(axis=1)
-    bid = encode_bid(logits[:, bids].argmax(axis=1))
-    quit_ = encode_quit(logits[:, quits].argmax(axis=1), m)
-    return np.select([kind == ActionKind.PASS, kind == ActionKind.BID], [PASS, bid], quit_)
+    choices = [np.full(len(logits), PASS), *(encode(logits[:, cols].argmax(axis=1)) for cols, encode in groups)]
+    return np.choose(kind, choices)
 
 
 def feature_columns(layout: ObservationLayout, own_features: tuple[str, ...], task_features: tuple[str, ...]

@@ -1,20 +1,22 @@
 """Actor networks of learned bidding policies: observation and action mask in, masked logits out (pure torch).
 
 The observation is ``[own features | task_0 features | … | task_{M−1} features]`` (``taskalloc_env.observation``);
-the logits are ``[pass, bid_0 … bid_{M−1}, quit_0 … quit_{M−1}]``, invalid actions set to ``MASKED_LOGIT``.
+the logits are ``[pass, bid_0 … bid_{M−1}, quit_0 … quit_{M−1}]``, or with ``kinds=3`` (the environment's
+``release_actions``) ``[…, release_0 … release_{M−1}]`` too (``taskalloc_env.actions``); invalid actions are set to
+``MASKED_LOGIT``.
 
 * ``pooling``: every task's features, concatenated with the agent's own features, go through one shared encoder;
   mean- and max-pooling over tasks gives a context. Each task's embedding with the context gives that task's bid
-  and quit logits, the context alone the pass logit (a Deep-Sets network, Zaheer et al. 2017). No weight depends
-  on M, so one set of weights serves any number of tasks.
+  and quit logits (and its release logit with ``kinds=3``), the context alone the pass logit (a Deep-Sets network,
+  Zaheer et al. 2017). No weight depends on M, so one set of weights serves any number of tasks.
 * ``attention``: every task's features with the agent's own features form a task token; self-attention layers
   let the tokens see each other (a Transformer encoder without positional encoding, Vaswani et al. 2017, so the
   tokens form a set as in the Set Transformer, Lee et al. 2019); the agent's own features, embedded, are the query
   of one attention read-out over the tokens, which gives the context. Each token with the context gives that
-  task's bid and quit logits, the context the pass logit. Like ``pooling``, no weight depends on M or N; unlike
-  it, a task's logits can depend on every other task (which tasks compete for the same agents, which groups are
-  nearly complete), not only through a mean and a max.
-* ``mlp``: a plain MLP from the flat observation to the 1 + 2M logits (fixed M).
+  task's bid and quit (and release) logits, the context the pass logit. Like ``pooling``, no weight depends on M
+  or N; unlike it, a task's logits can depend on every other task (which tasks compete for the same agents, which
+  groups are nearly complete), not only through a mean and a max.
+* ``mlp``: a plain MLP from the flat observation to the 1 + 2M (or 1 + 3M) logits (fixed M).
 
 ``NETWORKS`` names every class a checkpoint may ask for; each takes only integer sizes, so a checkpoint's
 architecture is plain JSON (``taskalloc.policies.checkpoint``). Training wraps these actors with a critic
@@ -31,6 +33,7 @@ import torch as th
 from torch import nn
 
 MASKED_LOGIT = -1e8
+KINDS = (2, 3)      # logits per task: bid and quit, or bid, quit and release (``release_actions``)
 
 
 def mlp(sizes: list[int], activate_last: bool = True) -> nn.Sequential:
@@ -40,6 +43,25 @@ def mlp(sizes: list[int], activate_last: bool = True) -> nn.Sequential:
         if activate_last or i < len(sizes) - 2:
             layers.append(nn.ReLU())
     return nn.Sequential(*layers)
+
+
+def check_kinds(kinds: int) -> None:
+    """Refuse a number of logits per task other than 2 or 3 (``KINDS``)."""
+    if kinds not in KINDS:
+        raise ValueError(f"kinds={kinds}: a task has 2 logits (bid, quit) or 3 (bid, quit, release)")
+
+
+def task_logits(pass_logit: th.Tensor, per_task: th.Tensor, mask: th.Tensor, name: str) -> th.Tensor:
+    """``[pass | kind 0 of every task | kind 1 … ]`` (B, 1 + K·M) from the pass logit (B, 1) and the per-task logits
+    (B, M, K), masked; a mask of another width is refused."""
+    n_tasks, kinds = per_task.shape[1], per_task.shape[2]
+    if mask.shape[-1] != 1 + kinds * n_tasks:
+        actions = "bid, quit, release" if kinds == 3 else "bid, quit"
+        raise ValueError(f"the {name} actor has {kinds} actions per task ({actions}): with {n_tasks} tasks it "
+                         f"takes a mask of 1 + {kinds}·{n_tasks} = {1 + kinds * n_tasks} "
+                         f"columns, got {mask.shape[-1]}")
+    logits = th.cat([pass_logit, *per_task.unbind(dim=-1)], dim=-1)
+    return logits.masked_fill(~mask, MASKED_LOGIT)
 
 
 def split_tasks(observation: th.Tensor, own_size: int, task_size: int) -> tuple[th.Tensor, th.Tensor]:
@@ -71,15 +93,20 @@ class PoolingActor(nn.Module):
 
     name: ClassVar[str] = "pooling"
 
-    def __init__(self, own_size: int, task_size: int, hidden: int = 64) -> None:
+    def __init__(self, own_size: int, task_size: int, hidden: int = 64, kinds: int = 2) -> None:
         super().__init__()
-        self.own_size, self.task_size, self.hidden = own_size, task_size, hidden
+        check_kinds(kinds)
+        self.own_size, self.task_size, self.hidden, self.kinds = own_size, task_size, hidden, kinds
         self.actor = PoolingEncoder(own_size, task_size, hidden)
-        self.task_head = mlp([2 * hidden, hidden, 2], activate_last=False)
+        self.task_head = mlp([2 * hidden, hidden, kinds], activate_last=False)
         self.pass_head = nn.Linear(hidden, 1)
 
     def config(self) -> dict[str, int]:
-        return {"own_size": self.own_size, "task_size": self.task_size, "hidden": self.hidden}
+        return {"own_size": self.own_size, "task_size": self.task_size, "hidden": self.hidden, "kinds": self.kinds}
+
+    def action_width(self, n_tasks: int) -> int:
+        """The width of its logits (and of the mask it takes) on ``n_tasks`` tasks."""
+        return 1 + self.kinds * n_tasks
 
     def output_layers(self) -> list[nn.Linear]:
         return [self.task_head[-1], self.pass_head]
@@ -90,9 +117,8 @@ class PoolingActor(nn.Module):
     def forward(self, observation: th.Tensor, mask: th.Tensor) -> th.Tensor:
         own, tasks = split_tasks(observation, self.own_size, self.task_size)
         embedded, context = self.actor(own, tasks)
-        per_task = self.task_head(th.cat([embedded, context.unsqueeze(1).expand_as(embedded)], dim=-1))  # (B, M, 2)
-        logits = th.cat([self.pass_head(context), per_task[..., 0], per_task[..., 1]], dim=-1)
-        return logits.masked_fill(~mask, MASKED_LOGIT)
+        per_task = self.task_head(th.cat([embedded, context.unsqueeze(1).expand_as(embedded)], dim=-1))  # (B, M, K)
+        return task_logits(self.pass_head(context), per_task, mask, self.name)
 
 
 class AttentionActor(nn.Module):
@@ -100,11 +126,14 @@ class AttentionActor(nn.Module):
 
     name: ClassVar[str] = "attention"
 
-    def __init__(self, own_size: int, task_size: int, hidden: int = 64, heads: int = 4, layers: int = 2) -> None:
+    def __init__(self, own_size: int, task_size: int, hidden: int = 64, heads: int = 4, layers: int = 2,
+                 kinds: int = 2) -> None:
         super().__init__()
         if hidden % heads:
             raise ValueError(f"hidden={hidden} must be a multiple of heads={heads}")
+        check_kinds(kinds)
         self.own_size, self.task_size, self.hidden, self.heads, self.layers = own_size, task_size, hidden, heads, layers
+        self.kinds = kinds
         self.tokens = mlp([task_size + own_size, hidden, hidden], activate_last=False)
         self.encoder = nn.ModuleList(
             nn.TransformerEncoderLayer(hidden, heads, dim_feedforward=2 * hidden, dropout=0.0, batch_first=True,
@@ -112,12 +141,16 @@ class AttentionActor(nn.Module):
         self.norm = nn.LayerNorm(hidden)
         self.query = mlp([own_size, hidden], activate_last=False)
         self.read_out = nn.MultiheadAttention(hidden, heads, batch_first=True)
-        self.task_head = mlp([2 * hidden, hidden, 2], activate_last=False)
+        self.task_head = mlp([2 * hidden, hidden, kinds], activate_last=False)
         self.pass_head = mlp([hidden, hidden, 1], activate_last=False)
 
     def config(self) -> dict[str, int]:
         return {"own_size": self.own_size, "task_size": self.task_size, "hidden": self.hidden, "heads": self.heads,
-                "layers": self.layers}
+                "layers": self.layers, "kinds": self.kinds}
+
+    def action_width(self, n_tasks: int) -> int:
+        """The width of its logits (and of the mask it takes) on ``n_tasks`` tasks."""
+        return 1 + self.kinds * n_tasks
 
     def output_layers(self) -> list[nn.Linear]:
         return [self.task_head[-1], self.pass_head[-1]]
@@ -134,9 +167,8 @@ class AttentionActor(nn.Module):
         tokens = self.norm(tokens)
         query = self.query(own).unsqueeze(1)                                           # (B, 1, H)
         context = (query + self.read_out(query, tokens, tokens, need_weights=False)[0]).squeeze(1)   # (B, H)
-        per_task = self.task_head(th.cat([tokens, context.unsqueeze(1).expand_as(tokens)], dim=-1))  # (B, M, 2)
-        logits = th.cat([self.pass_head(context), per_task[..., 0], per_task[..., 1]], dim=-1)
-        return logits.masked_fill(~mask, MASKED_LOGIT)
+        per_task = self.task_head(th.cat([tokens, context.unsqueeze(1).expand_as(tokens)], dim=-1))  # (B, M, K)
+        return task_logits(self.pass_head(context), per_task, mask, self.name)
 
 
 class MlpActor(nn.Module):
@@ -158,6 +190,10 @@ class MlpActor(nn.Module):
     def fits(self, own_size: int, task_size: int, n_tasks: int) -> bool:
         return self.obs_size == own_size + n_tasks * task_size
 
+    def action_width(self, n_tasks: int) -> int:
+        """The width of its logits (fixed: it fits one number of tasks)."""
+        return self.n_actions
+
     def forward(self, observation: th.Tensor, mask: th.Tensor) -> th.Tensor:
         if mask.shape[-1] != self.n_actions:
             raise ValueError(f"the mlp actor was built for {self.n_actions} actions, got {mask.shape[-1]}")
@@ -168,7 +204,7 @@ NETWORKS: dict[str, type[nn.Module]] = {cls.name: cls for cls in (PoolingActor, 
 
 
 def masked_logits(actor: nn.Module, observation: np.ndarray, action_mask: np.ndarray) -> th.Tensor:
-    """Masked logits (B, 1 + 2M) of a batch of raw observations (B, D) and masks (B, 1 + 2M)."""
+    """Masked logits (B, 1 + KM) of a batch of raw observations (B, D) and masks (B, 1 + KM)."""
     obs = th.as_tensor(np.asarray(observation), dtype=th.float32)
     mask = th.as_tensor(np.asarray(action_mask) > 0)
     with th.no_grad():

@@ -256,11 +256,12 @@ def test_an_asynchronous_release_goes_out_as_empty_bids_stamped_now():
 
 
 def test_a_learned_policy_refuses_an_environment_with_release_actions():
-    """The committed actors have the heads of the 1 + 2M layout; a release layout is refused before any step."""
+    """The committed actors have the heads of the 1 + 2M layout (``kinds=2``); a release layout is refused before any
+    step (``tests/test_learned_release.py``: actors with release heads)."""
     from taskalloc.policies import make_policy
 
     policy = make_policy("learned:train_small")
     env = TaskAllocEnv("train_small", release_actions=True, **policy.env_overrides)
     env.reset(seed=0)
-    with pytest.raises(ValueError, match="no release actions"):
+    with pytest.raises(ValueError, match=r"1 \+ 2M layout .* has release actions: build it without release_actions"):
         policy.start(env, 0)

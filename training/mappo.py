@@ -180,10 +180,11 @@ def check_actor(cfg: ActorSpec) -> None:
         raise ConfigError(f"training field 'hidden': {cfg.hidden} must be a multiple of heads={cfg.heads}")
 
 
-def make_actor(cfg: ActorSpec, own_size: int, task_size: int) -> nn.Module:
+def make_actor(cfg: ActorSpec, own_size: int, task_size: int, kinds: int = 2) -> nn.Module:
+    """The config's actor network; ``kinds``: logits per task, 3 where the environment has release actions."""
     if cfg.actor == "attention":
-        return AttentionActor(own_size, task_size, cfg.hidden, cfg.heads, cfg.layers)
-    return PoolingActor(own_size, task_size, cfg.hidden)
+        return AttentionActor(own_size, task_size, cfg.hidden, cfg.heads, cfg.layers, kinds)
+    return PoolingActor(own_size, task_size, cfg.hidden, kinds)
 
 
 class ActorCritic(nn.Module):
@@ -396,10 +397,13 @@ def main(argv: Sequence[str] | None = None, hook: PartnerHook | None = None) -> 
             raise ConfigError(f"mixture entry {g.label!r} has other observation features than {groups[0].label!r} "
                               f"(own {g.layout.own_names}, per task {g.layout.task_names}); one actor needs one "
                               "feature set (e.g. every entry on a faulty network, or none)")
+        if g.kinds != (3 if cfg.env_overrides.get("release_actions") else 2):
+            raise ConfigError(f"mixture entry {g.label!r}: release_actions goes into env_overrides (the checkpoint "
+                              "keeps them, so its policy plays with release actions), not into an entry's overrides")
         g.reset()
 
     # -- networks --------------------------------------------------------------------------------------------------
-    actor = make_actor(cfg, layout.own_size, layout.task_size)
+    actor = make_actor(cfg, layout.own_size, layout.task_size, groups[0].kinds)
     model = ActorCritic(actor, StateCritic(layout.n_equipment, cfg.hidden, cfg.heads))
     if cfg.init_from:
         summary["init_from"] = load_weights(model, cfg.init_from, hook)

@@ -68,6 +68,7 @@ class Group:
         env = self.envs[0]
         self.agents = list(env.possible_agents)
         self.n_agents, self.n_tasks = config.n_agents, config.n_tasks
+        self.kinds = (int(env.action_space(self.agents[0]).n) - 1) // self.n_tasks   # 2, or 3 with release actions
         self.layout = env.observation_layout
         self.n_equipment = self.layout.n_equipment
         self.first_seed = first_seed

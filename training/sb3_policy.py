@@ -6,7 +6,9 @@ holds the actor (``pi``, one of ``taskalloc.policies.networks.NETWORKS``) and a 
 the masked logits, so the policy's ``action_net`` is the identity. The mask is applied inside the network (invalid
 actions get ``MASKED_LOGIT``), so plain PPO never samples an invalid action; MaskablePPO masks again, which changes
 nothing. Actor and critic have separate encoders. A trained policy's actor is ``actor_of(policy)``, which is what a
-checkpoint stores (``taskalloc.policies.checkpoint``).
+checkpoint stores (``taskalloc.policies.checkpoint``). With the environment's ``release_actions`` the policy is built
+with ``kinds=3`` (``taskalloc.policies.networks``: bid, quit and release logits per task), which ``taskalloc train``
+passes in ``policy_kwargs``.
 """
 
 from __future__ import annotations
@@ -24,8 +26,7 @@ from torch import nn
 
 from taskalloc.policies import checkpoint
 from taskalloc.policies.learned import LearnedPolicy, resolve
-from taskalloc.policies.networks import MlpActor, PoolingActor, PoolingEncoder, mlp, split_tasks
-from taskalloc_env.actions import n_actions as action_count
+from taskalloc.policies.networks import MlpActor, PoolingActor, PoolingEncoder, check_kinds, mlp, split_tasks
 from taskalloc_env.observation import TASK_FEATURES, ObservationLayout
 
 BODIES = ("pooling", "mlp")
@@ -54,8 +55,9 @@ class Body(nn.Module):
     def _split(self, features: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
         if isinstance(self.pi, MlpActor):
             n_actions = self.pi.n_actions
-        else:                      # pooling, any M: width = own + M·F + 1 + 2M
-            n_actions = action_count((features.shape[-1] - self.pi.own_size - 1) // (self.pi.task_size + 2))
+        else:                      # pooling, any M: width = own + M·F + 1 + K·M
+            n_tasks = (features.shape[-1] - self.pi.own_size - 1) // (self.pi.task_size + self.pi.kinds)
+            n_actions = self.pi.action_width(n_tasks)
         return features[:, :-n_actions], features[:, -n_actions:] > 0.5
 
     def forward(self, features: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
@@ -76,10 +78,12 @@ class _TaskNetMixin:
     """Builds the body instead of SB3's MLP extractor and makes the action net the identity."""
 
     def __init__(self, observation_space: gym.spaces.Dict, action_space: gym.spaces.Discrete, lr_schedule: Any,
-                 body: str = "pooling", hidden: int = 64, task_size: int = len(TASK_FEATURES), **kwargs: Any) -> None:
+                 body: str = "pooling", hidden: int = 64, task_size: int = len(TASK_FEATURES), kinds: int = 2,
+                 **kwargs: Any) -> None:
         if body not in BODIES:
             raise ValueError(f"body {body!r} is not one of {BODIES}")
-        self.body, self.hidden, self.task_size = body, hidden, task_size
+        check_kinds(kinds)
+        self.body, self.hidden, self.task_size, self.kinds = body, hidden, task_size, kinds
         kwargs.setdefault("features_extractor_class", MaskedObsExtractor)
         super().__init__(observation_space, action_space, lr_schedule, **kwargs)  # type: ignore[call-arg]
 
@@ -87,8 +91,8 @@ class _TaskNetMixin:
         obs_size = self.observation_space["observation"].shape[0]
         n_actions = int(self.action_space.n)
         if self.body == "pooling":
-            own_size = obs_size - (n_actions - 1) // 2 * self.task_size
-            pi = PoolingActor(own_size, self.task_size, self.hidden)
+            own_size = obs_size - (n_actions - 1) // self.kinds * self.task_size
+            pi = PoolingActor(own_size, self.task_size, self.hidden, self.kinds)
             self.mlp_extractor = Body(pi, PoolingEncoder(own_size, self.task_size, self.hidden), n_actions,
                                       self.hidden)
         else:
@@ -105,7 +109,7 @@ class _TaskNetMixin:
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()  # type: ignore[misc]
-        data.update(body=self.body, hidden=self.hidden, task_size=self.task_size)
+        data.update(body=self.body, hidden=self.hidden, task_size=self.task_size, kinds=self.kinds)
         return data
 
 

@@ -158,12 +158,15 @@ def load_config(argv: list[str] | None = None) -> TrainConfig:
 def build_model(cfg: TrainConfig, venv: TaskAllocVecEnv) -> MaskablePPO | PPO:
     algo_class, policy_class = ALGOS[cfg.algo]
     lr = cfg.learning_rate
+    probe = TaskAllocEnv(**cfg.env_kwargs())        # its layout, and release logits with release_actions
     model = algo_class(
         policy_class, venv, learning_rate=(lambda progress: progress * lr) if cfg.linear_lr else lr,
         n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs, gamma=cfg.gamma,
         gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range, ent_coef=cfg.ent_coef, vf_coef=cfg.vf_coef,
         max_grad_norm=cfg.max_grad_norm, target_kl=cfg.target_kl, seed=cfg.seed, verbose=cfg.verbose,
-        device="cpu", policy_kwargs={"body": cfg.body, "hidden": cfg.hidden, "task_size": layout(cfg).task_size},
+        device="cpu", policy_kwargs={"body": cfg.body, "hidden": cfg.hidden,
+                                     "task_size": probe.observation_layout.task_size,
+                                     "kinds": 3 if probe.config.release_actions else 2},
         tensorboard_log=str(Path(cfg.log_dir) / "tb") if cfg.tensorboard else None,
     )
     return model
