@@ -10,8 +10,8 @@ in; resets are rare) and is then stepped only here. ``sync`` writes an instance 
 rarely (``evaluate``, the reason an action was masked).
 
 Scope (``unsupported`` names what is outside it): the synchronous consensus (``sync`` and ``every_step``), perfect
-links or independent message loss (``loss_model="independent"``, no delay), no pop-up tasks, no task quitting, no
-release actions, ``require_known_capacity`` off; the compiled kernels on (``TASKALLOC_KERNELS`` unset).
+links or independent message loss (``loss_model="independent"``, no delay), no pop-up tasks, no release actions,
+``require_known_capacity`` off, the compiled kernels on (``TASKALLOC_KERNELS`` unset). Task quitting is in.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ COUNTERS = {"rounds": batch.ROUND, "messages": batch.MESSAGES, "informative_mess
             "rounds_to_agreement": batch.TO_AGREEMENT, "messages_to_agreement": batch.MESSAGES_TO_AGREEMENT,
             "messages_sent": batch.SENT, "messages_lost": batch.LOST, "data_items_sent": batch.ITEMS_SENT,
             "max_agent_messages": batch.MAX_AGENT, "conflicting_bids": batch.CONFLICTING,
-            "silent_releases": batch.SILENT}
+            "silent_releases": batch.SILENT, "quits": batch.QUITS, "quits_seen": batch.QUITS_SEEN}
 
 
 def unsupported(cfg: TaskAllocConfig) -> str | None:
@@ -56,7 +56,6 @@ def unsupported(cfg: TaskAllocConfig) -> str | None:
          f"loss_model={cfg.loss_model!r} (only 'independent')"),
         (cfg.max_delay == 0, "max_delay > 0"),
         (cfg.popup_tasks == 0, "popup_tasks > 0"),
-        (not cfg.task_quitting, "task_quitting"),
         (not cfg.release_actions, "release_actions"),
         (not cfg.require_known_capacity, "require_known_capacity"),
     ]
@@ -89,6 +88,8 @@ class ArrayBatch:
         self.frozen, self.first_l_paid = cfg.marginal_gain == "frozen", cfg.conflict_policy == "first_L_paid"
         self.prereq_mode, self.warping = PREREQ_MODES[cfg.prereq_mode], bool(cfg.bid_warping)
         self.strict = cfg.outbid_ties == "strict"
+        self.task_quitting, self.delta = bool(cfg.task_quitting), int(cfg.delta)
+        self.reset_on_additions, self.until_joined = cfg.reset_on == "additions", cfg.quit_block == "until_joined"
         names = layout.task_names
         self.columns = np.array([names.index(c) for c in KERNEL_COLUMNS], dtype=np.int64)
         self.silence_column = names.index("member_silence") if "member_silence" in names else -1
@@ -104,6 +105,7 @@ class ArrayBatch:
         self.bundles, self.bundle_len = z(n, m, dtype=i64), z(n, dtype=i64)
         self.paths, self.path_len = z(n, m, dtype=i64), z(n, dtype=i64)
         self.assigned_at, self.quit = z(n, m, dtype=i64), z(n, m, dtype=b)
+        self.quit_blocked, self.pending = z(n, m, dtype=b), z(n, m, dtype=b)      # pending: quits nobody saw yet
         self.last_count, self.last_ids, self.last_values = z(n, m, dtype=i64), z(n, m, w, dtype=i64), z(n, m, w)
         self.last_bundles, self.last_bundle_len = z(n, m, dtype=i64), z(n, dtype=i64)
         self.last_heard, self.sent_by = z(n, n, dtype=i64), z(n, dtype=i64)
@@ -140,7 +142,8 @@ class ArrayBatch:
         self.last_ids[k], self.last_values[k], self.last_count[k] = self.ids[k], self.values[k], self.count[k]
         self.stamps[k], self.known[k] = kn.timestamps, kn.known
         self.bundle_len[k] = self.path_len[k] = self.last_bundle_len[k] = 0
-        self.assigned_at[k], self.quit[k] = kn.assigned_at, kn.quit
+        self.assigned_at[k], self.quit[k], self.quit_blocked[k] = kn.assigned_at, kn.quit, kn.quit_blocked
+        self.pending[k] = False
         self.last_heard[k], self.sent_by[k] = 0, 0
         self.passed[k] = env._engine.passed
         self.dirty[k] = True                       # every path is timed (empty) before the first view
@@ -180,6 +183,8 @@ class ArrayBatch:
         g.members[:], g.bids[:] = self.ids[k, :, :, :w], self.values[k, :, :, :w]
         g.count[:], g.own[:] = self.count[k], self.own[k]
         kn.timestamps[:], kn.known[:], kn.assigned_at[:] = self.stamps[k], self.known[k], self.assigned_at[k]
+        kn.quit[:], kn.quit_blocked[:] = self.quit[k], self.quit_blocked[k]
+        p._pending_quits = {(int(i), int(j)): None for i, j in zip(*np.nonzero(self.pending[k]))}
         kn.bundles = [self.bundles[k, i, :self.bundle_len[k, i]].tolist() for i in range(self.n)]
         kn.paths = [self.paths[k, i, :self.path_len[k, i]].tolist() for i in range(self.n)]
         p.round, p.stable_rounds = int(ist[batch.ROUND]), int(ist[batch.STABLE])
@@ -204,15 +209,21 @@ class ArrayBatch:
     def step(self, actions: np.ndarray, which: np.ndarray) -> None:
         """One step of the instances in ``which`` with their (K, N) valid actions: apply, end the rounds that end
         (the losses drawn from each instance's generator, as ``IndependentLoss.lost`` draws them), score."""
-        batch.apply_actions(which, actions, self.every_step, self.istate, self.passed, self.dirty, self.bundles,
-                            self.bundle_len, self.paths, self.path_len, self.assigned_at, self.count, self.ids,
-                            self.values, self.own, self.capacity, self.view_bid, self.slot, self.displaced)
+        batch.apply_actions(which, actions, self.every_step, self.by_bundle, self.until_joined, self.leg_cost,
+                            self.arrival_time, self.frozen, self.istate, self.fstate, self.passed, self.dirty,
+                            self.bundles, self.bundle_len, self.paths, self.path_len, self.assigned_at, self.quit,
+                            self.quit_blocked, self.pending, self.count, self.ids, self.values, self.own,
+                            self.capacity, self.view_bid, self.slot, self.displaced, self.speed, self.dist_at,
+                            self.dist_tt, self.earliest, self.deadline, self.doable, self.duration, self.task_start,
+                            self.pay, self.gain, self.pt_members, self.pt_reward, self.pt_start, self.pt_cost)
         if not self.perfect:
             links = self.statics[:, batch.N_LINKS]
             for k in np.flatnonzero(self.istate[:, batch.ENDS_ROUND]).tolist():
                 self.keep[k, :links[k]] = ~(self.rngs[k].random(int(links[k])) < self.loss)
-        batch.end_rounds(self.istate, self.statics, self.perfect, self.by_bundle, self.canonical, self.keep,
-                         self.passed, self.dirty, self.count, self.ids, self.values, self.own, self.stamps, self.known,
+        batch.end_rounds(self.istate, self.statics, self.perfect, self.by_bundle, self.canonical, self.task_quitting,
+                         self.delta, self.reset_on_additions, self.keep, self.assigned_at, self.quit,
+                         self.quit_blocked, self.pending, self.passed, self.dirty, self.count, self.ids, self.values,
+                         self.own, self.stamps, self.known,
                          self.bundles, self.bundle_len, self.paths, self.path_len, self.last_count, self.last_ids,
                          self.last_values, self.last_bundles, self.last_bundle_len, self.last_heard, self.sent_by,
                          self.adjacency, self.component, self.single, self.capacity, self.restricted, self.required,
@@ -230,9 +241,10 @@ class ArrayBatch:
 
     def observe(self, which: np.ndarray, obs: np.ndarray, masks: np.ndarray) -> None:
         """The observations and masks of the instances in ``which``, written into rows of ``obs`` and ``masks``."""
-        batch.observe_all(which, self.prereq_mode, self.warping, self.strict, self.silence_column, self.columns,
-                          self.istate, self.fstate, self.statics, self.passed, self.count, self.ids, self.values,
-                          self.own, self.stamps, self.assigned_at, self.quit, self.bundle_len, self.single, self.gain,
+        batch.observe_all(which, self.prereq_mode, self.warping, self.strict, self.silence_column,
+                          self.task_quitting, self.delta, self.columns, self.istate, self.fstate, self.statics,
+                          self.passed, self.count, self.ids, self.values, self.own, self.stamps, self.assigned_at,
+                          self.quit, self.quit_blocked, self.bundle_len, self.single, self.gain,
                           self.equipment_match, self.fillable, self.capacity, self.restricted, self.required,
                           self.agent_eq, self.prereqs, self.view_bid, self.outbid, self.eligible, self.prereqs_met,
                           self.members, self.group_total, self.lowest_bid, self.displaced, self.displaced_bid,

@@ -5,7 +5,8 @@ the bid view, counters); each phase of a step is one call that loops over the in
 rules as the single env through the kernels it already uses (``merge.exchange_all``, ``bids.bid_rows``,
 ``plan.retime_rows``, ``score.paid_groups``, ``observe.step_features``, ``masks.fill_masks``, ``table.set_member``):
 
-* ``apply_actions``: the joint actions in agent order (``engine.StepEngine.apply``, ``Protocol.bid``);
+* ``apply_actions``: the joint actions in agent order (``engine.StepEngine.apply``, ``Protocol.bid``,
+  ``Protocol.quit``);
 * ``end_rounds``: Phase 2 of the instances whose round ends (``Protocol.end_round`` on perfect links or under
   independent loss, whose draws the caller makes from each instance's own generator);
 * ``score_all``: the changed paths re-timed (``ScoringModel.refresh``), the team score (``scoring.team_score``),
@@ -26,15 +27,17 @@ from taskalloc_env.kernels.masks import fill_masks
 from taskalloc_env.kernels.merge import exchange_all
 from taskalloc_env.kernels.observe import step_features
 from taskalloc_env.kernels.plan import retime_rows
+from taskalloc_env.kernels.quits import quittable
 from taskalloc_env.kernels.score import paid_groups
-from taskalloc_env.kernels.table import set_member
+from taskalloc_env.kernels.table import joined_members, set_member
 
 NONE = -1
+NO_TIMER = np.iinfo(np.int64).max          # ``protocol.NO_TIMER``: the quit conditions without the timer
 # columns of the (K, C) integer state
 ROUND, STEPS, STABLE, CONVERGED, UNRESOLVED, BIDS, MESSAGES, INFORMATIVE, DATA_ITEMS, SENT, LOST, ITEMS_SENT, \
     MAX_AGENT, CONFLICTING, TO_AGREEMENT, MESSAGES_TO_AGREEMENT, SILENT, VALID, CONFLICTS, ENDS_ROUND, \
-    TERMINATED, TRUNCATED, INVALID = range(23)
-INT_STATE = 23
+    TERMINATED, TRUNCATED, INVALID, QUITS, QUITS_SEEN = range(25)
+INT_STATE = 25
 # ``Protocol.unresolved`` as a code: none, not settled, disagreement, round bound (``UNRESOLVED_TEXT`` in vector)
 NOT_SETTLED, DISAGREE, ROUND_BOUND = 1, 2, 3
 # columns of the (K, C) float state
@@ -78,14 +81,23 @@ def pairwise_sum(a: np.ndarray, n: int) -> float:
 
 
 @jit
-def apply_actions(which: np.ndarray, actions: np.ndarray, every_step: bool, istate: np.ndarray,
+def apply_actions(which: np.ndarray, actions: np.ndarray, every_step: bool, by_bundle: bool, until_joined: bool,
+                  leg_cost: bool, arrival_time: bool, frozen: bool, istate: np.ndarray, fstate: np.ndarray,
                   passed: np.ndarray, dirty: np.ndarray, bundles: np.ndarray, bundle_len: np.ndarray,
-                  paths: np.ndarray, path_len: np.ndarray, assigned_at: np.ndarray, count: np.ndarray,
-                  ids: np.ndarray, values: np.ndarray, own: np.ndarray, capacity: np.ndarray, view_bid: np.ndarray,
-                  slot: np.ndarray, displaced: np.ndarray) -> None:
-    """``StepEngine.apply`` of each instance in ``which``: its (N,) valid actions (pass or bid j + 1) in agent order
-    against the view taken before them (``Protocol.bid``); marks ``ENDS_ROUND`` where the round ends."""
+                  paths: np.ndarray, path_len: np.ndarray, assigned_at: np.ndarray, quit: np.ndarray,
+                  quit_blocked: np.ndarray, pending: np.ndarray, count: np.ndarray, ids: np.ndarray,
+                  values: np.ndarray, own: np.ndarray, capacity: np.ndarray, view_bid: np.ndarray, slot: np.ndarray,
+                  displaced: np.ndarray, speed: np.ndarray, dist_at: np.ndarray, dist_tt: np.ndarray,
+                  earliest: np.ndarray, deadline: np.ndarray, doable: np.ndarray, duration: np.ndarray,
+                  task_start: np.ndarray, pay: np.ndarray, gain: np.ndarray, pt_members: np.ndarray,
+                  pt_reward: np.ndarray, pt_start: np.ndarray, pt_cost: np.ndarray) -> None:
+    """``StepEngine.apply`` of each instance in ``which``: its (N,) valid actions (pass, bid j + 1, quit M + 1 + j)
+    in agent order against the view taken before them (``Protocol.bid``, ``Protocol.quit``); marks ``ENDS_ROUND``
+    where the round ends. A quit after a change in the same step re-times the changed paths first, as
+    ``Protocol.quit_options`` does through ``Protocol.view``."""
     n_inst, n = actions.shape
+    m = count.shape[2]
+    gone = np.zeros(m, dtype=np.bool_)
     for k in range(n_inst):
         istate[k, ENDS_ROUND] = False
         if not which[k]:
@@ -95,6 +107,25 @@ def apply_actions(which: np.ndarray, actions: np.ndarray, every_step: bool, ista
             action = actions[k, i]
             if action == 0:
                 passed[k, i] = True
+                continue
+            if action > m:                                   # actions.encode_quit(j, m) = 1 + m + j
+                j = action - 1 - m
+                touched = False
+                for a in range(n):
+                    touched = touched or dirty[k, a]
+                if touched:
+                    _refresh_paths(dirty[k], paths[k], path_len[k], speed[k], dist_at[k], dist_tt[k], earliest[k],
+                                   deadline[k], doable[k], duration[k], task_start[k], pay[k], fstate[k, LAM],
+                                   fstate[k, GAMMA], leg_cost, arrival_time, frozen, gain[k], slot[k],
+                                   pt_members[k], pt_reward[k], pt_start[k], pt_cost[k])
+                _release(i, j, by_bundle, bundles[k], bundle_len[k], paths[k], path_len[k], ids[k], values[k],
+                         count[k], own[k], capacity[k], gone)
+                quit[k, i, j] = True
+                quit_blocked[k, i, j] = until_joined
+                istate[k, QUITS] += 1
+                pending[k, i, j] = True
+                dirty[k, i] = True
+                passed[k, i] = False
                 continue
             j = action - 1                                   # actions.encode_bid(j) = 1 + j
             value = view_bid[k, i, j]
@@ -110,6 +141,7 @@ def apply_actions(which: np.ndarray, actions: np.ndarray, every_step: bool, ista
             set_member(ids[k], values[k], count[k], own[k], capacity[k], i, i, j, value)
             assigned_at[k, i, j] = now
             istate[k, BIDS] += 1
+            pending[k, i, j] = False                         # re-bid before anyone saw the quit
             dirty[k, i] = True
             passed[k, i] = False
         istate[k, STEPS] += 1
@@ -152,17 +184,18 @@ def _release(i: int, lost: int, by_bundle: bool, bundles: np.ndarray, bundle_len
 
 @jit
 def end_rounds(istate: np.ndarray, statics: np.ndarray, perfect: bool, by_bundle: bool, canonical: bool,
-               keep: np.ndarray, passed: np.ndarray, dirty: np.ndarray, count: np.ndarray, ids: np.ndarray,
-               values: np.ndarray, own: np.ndarray, stamps: np.ndarray, known: np.ndarray, bundles: np.ndarray,
-               bundle_len: np.ndarray, paths: np.ndarray, path_len: np.ndarray, last_count: np.ndarray,
-               last_ids: np.ndarray, last_values: np.ndarray, last_bundles: np.ndarray, last_bundle_len: np.ndarray,
-               last_heard: np.ndarray, sent_by: np.ndarray, adjacency: np.ndarray, component: np.ndarray,
-               single: np.ndarray, capacity: np.ndarray, restricted: np.ndarray, required: np.ndarray,
-               agent_eq: np.ndarray) -> None:
+               task_quitting: bool, delta: int, reset_on_additions: bool, keep: np.ndarray, assigned_at: np.ndarray,
+               quit: np.ndarray, quit_blocked: np.ndarray, pending: np.ndarray, passed: np.ndarray, dirty: np.ndarray,
+               count: np.ndarray, ids: np.ndarray, values: np.ndarray, own: np.ndarray, stamps: np.ndarray,
+               known: np.ndarray, bundles: np.ndarray, bundle_len: np.ndarray, paths: np.ndarray, path_len: np.ndarray,
+               last_count: np.ndarray, last_ids: np.ndarray, last_values: np.ndarray, last_bundles: np.ndarray,
+               last_bundle_len: np.ndarray, last_heard: np.ndarray, sent_by: np.ndarray, adjacency: np.ndarray,
+               component: np.ndarray, single: np.ndarray, capacity: np.ndarray, restricted: np.ndarray,
+               required: np.ndarray, agent_eq: np.ndarray) -> None:
     """``Protocol.end_round`` of every instance whose ``ENDS_ROUND`` is set: snapshot, send (``keep`` (K, links):
     the links' messages not lost, sender-major), deliver in (receiver, sender) order, merge (``exchange_all``),
-    forget silent agents (lossy links), release outbid tasks, counters, the convergence test; every agent present
-    passes no longer."""
+    count the quits seen, forget silent agents (lossy links), release outbid tasks, the quit timers and blocks,
+    counters, the convergence test; every agent present passes no longer."""
     n_inst, n, m, width = ids.shape
     gone = np.zeros(m, dtype=np.bool_)
     own_before = np.zeros((n, m), dtype=np.bool_)
@@ -216,6 +249,21 @@ def end_rounds(istate: np.ndarray, statics: np.ndarray, perfect: bool, by_bundle
             for d in range(delivered):
                 if last_heard[k, receiver[d], sender[d]] < now:
                     last_heard[k, receiver[d], sender[d]] = now
+        for i in range(n):                                   # Protocol._count_seen_quits
+            for j in range(m):
+                if not pending[k, i, j]:
+                    continue
+                seen = False
+                for h in range(n):
+                    listed_before, listed_now = False, False
+                    for c in range(snap_count[0, h, j]):
+                        listed_before = listed_before or snap_ids[0, h, j, c] == i
+                    for c in range(count[k, h, j]):
+                        listed_now = listed_now or ids[k, h, j, c] == i
+                    seen = seen or (listed_before and not listed_now)
+                if seen:
+                    pending[k, i, j] = False
+                    istate[k, QUITS_SEEN] += 1
         if not perfect:                                      # Protocol._forget_silent
             timeout = statics[k, SILENCE_TIMEOUT]
             listed = np.zeros((n, n), dtype=np.bool_)
@@ -256,6 +304,32 @@ def end_rounds(istate: np.ndarray, statics: np.ndarray, perfect: bool, by_bundle
             _release(i, lost_task, by_bundle, bundles[k], bundle_len[k], paths[k], path_len[k], ids[k], values[k],
                      count[k], own[k], capacity[k], gone)
             dirty[k, i] = True
+        blocked = False
+        for i in range(n):
+            for j in range(m):
+                blocked = blocked or quit_blocked[k, i, j]
+        pending_quit = False
+        if task_quitting or blocked:
+            joined = joined_members(ids[k], snap_ids[0])
+            if task_quitting:                                # Protocol._reset_quit_timers, then _quit_pending
+                allowed = quittable(count[k], capacity[k], own[k], quit[k], single[k], assigned_at[k], NO_TIMER)
+                for i in range(n):
+                    for j in range(m):
+                        updated = joined[i, j]
+                        if not reset_on_additions:
+                            updated = False
+                            for c in range(width):
+                                updated = updated or ids[k, i, j, c] != snap_ids[0, i, j, c] \
+                                    or values[k, i, j, c] != snap_values[0, i, j, c]
+                        if updated and allowed[i, j]:
+                            assigned_at[k, i, j] = now
+                for i in range(n):
+                    for j in range(m):
+                        pending_quit = pending_quit or (allowed[i, j] and now - 1 - assigned_at[k, i, j] <= delta)
+            if blocked:
+                for i in range(n):
+                    for j in range(m):
+                        quit_blocked[k, i, j] = quit_blocked[k, i, j] and not joined[i, j]
         istate[k, MESSAGES] += delivered
         istate[k, INFORMATIVE] += informative
         istate[k, DATA_ITEMS] += items_delivered
@@ -288,7 +362,7 @@ def end_rounds(istate: np.ndarray, statics: np.ndarray, perfect: bool, by_bundle
         if changed:
             istate[k, TO_AGREEMENT] = now
             istate[k, MESSAGES_TO_AGREEMENT] = istate[k, MESSAGES]
-        istate[k, STABLE] = 0 if changed else istate[k, STABLE] + 1
+        istate[k, STABLE] = 0 if changed or pending_quit else istate[k, STABLE] + 1
         stable = istate[k, STABLE] >= statics[k, DIAMETER] + 1
         settled = True
         if stable and not perfect:                           # Protocol._settled: heard after the last change
@@ -403,9 +477,10 @@ def score_all(which: np.ndarray, stepped: np.ndarray, max_cycles: int, leg_cost:
 
 @jit
 def observe_all(which: np.ndarray, prereq_mode: int, warping: bool, strict: bool, silence_column: int,
-                columns: np.ndarray, istate: np.ndarray, fstate: np.ndarray, statics: np.ndarray,
-                passed: np.ndarray, count: np.ndarray, ids: np.ndarray, values: np.ndarray, own: np.ndarray,
-                stamps: np.ndarray, assigned_at: np.ndarray, quit: np.ndarray, bundle_len: np.ndarray,
+                task_quitting: bool, delta: int, columns: np.ndarray, istate: np.ndarray, fstate: np.ndarray,
+                statics: np.ndarray, passed: np.ndarray, count: np.ndarray, ids: np.ndarray, values: np.ndarray,
+                own: np.ndarray, stamps: np.ndarray, assigned_at: np.ndarray, quit: np.ndarray,
+                quit_blocked: np.ndarray, bundle_len: np.ndarray,
                 single: np.ndarray, gain: np.ndarray, equipment_match: np.ndarray, fillable: np.ndarray,
                 capacity: np.ndarray, restricted: np.ndarray, required: np.ndarray, agent_eq: np.ndarray,
                 prereqs: np.ndarray, view_bid: np.ndarray, outbid: np.ndarray, eligible: np.ndarray,
@@ -429,7 +504,7 @@ def observe_all(which: np.ndarray, prereq_mode: int, warping: bool, strict: bool
         for i in range(n):
             sizes[i] = bundle_len[k, i]
             sizes_float[i] = bundle_len[k, i]
-        bid_rows(rows, count[k], ids[k], values[k], single[k], gain[k], quit[k], sizes, equipment_match[k],
+        bid_rows(rows, count[k], ids[k], values[k], single[k], gain[k], quit_blocked[k], sizes, equipment_match[k],
                  fillable[k], everyone_known, capacity[k], restricted[k], required[k], agent_eq[k], prereqs[k],
                  prereq_mode, statics[k, MAX_BUNDLE], warping, strict, view_bid[k], outbid[k], eligible[k],
                  prereqs_met[k], members[k], group_total[k], lowest_bid[k], displaced[k], displaced_bid[k],
@@ -438,8 +513,11 @@ def observe_all(which: np.ndarray, prereq_mode: int, warping: bool, strict: bool
             for j in range(m):
                 can_bid[i, j] = eligible[k, i, j] and outbid[k, i, j] and gain[k, i, j] > 0
         now = istate[k, ROUND]
+        can_quit = no_quits                                  # Protocol.quit_options
+        if task_quitting:
+            can_quit = quittable(members[k], capacity[k], own[k], quit[k], single[k], assigned_at[k], now - delta)
         step_features(tasks[k], columns, fstate[k, UNIT], gain[k], can_bid, outbid[k], members[k], capacity[k],
-                      lowest_bid[k], group_total[k], displaced_bid[k], in_bundle[k], own[k], quit[k], no_quits, now,
+                      lowest_bid[k], group_total[k], displaced_bid[k], in_bundle[k], own[k], quit[k], can_quit, now,
                       assigned_at[k], prereqs_met[k], own_features[k], sizes_float,
                       min(now / statics[k, MAX_ROUNDS], 1.0), passed[k])
         if silence_column >= 0:
@@ -454,7 +532,7 @@ def observe_all(which: np.ndarray, prereq_mode: int, warping: bool, strict: bool
                             value = (now - stamps[k, i, a]) / timeout
                         quiet = max(quiet, value) if c > 0 else value
                     tasks[k, i, j, silence_column] = min(quiet, 1.0)
-        fill_masks(can_bid, no_quits, no_quits, passed[k], masks[k])
+        fill_masks(can_bid, can_quit, can_quit, passed[k], masks[k])
         own_size, task_size = own_features.shape[2], tasks.shape[3]
         for i in range(n):
             for c in range(own_size):
