@@ -126,9 +126,9 @@ class TaskAllocVectorEnv:
             raise ConfigError(f"engine='arrays' does not cover {outside}; use engine='auto' or 'instances'")
         # which path steps the instances: the compiled arrays where the options allow, else each env in turn
         self.engine = "instances" if engine == "instances" or outside is not None else "arrays"
-        self._batch = ArrayBatch(k, template) if self.engine == "arrays" else None
         self._obs = np.zeros((k, n, d), dtype=box.dtype)
         self._masks = np.zeros((k, n, a), dtype=np.int8)
+        self._batch = ArrayBatch(k, template, self._obs) if self.engine == "arrays" else None
         self._ended = np.zeros(k, dtype=bool)            # the instance's episode ended at the last step
         self._started = False
 
@@ -158,7 +158,7 @@ class TaskAllocVectorEnv:
         chosen = self._reset_mask(options.pop("reset_mask", None))
         seeds = self._seeds(seed)
         if self._batch is not None:
-            self._restart(chosen, seeds, options or None)
+            self._restart(chosen, seeds)
         else:
             for k in np.flatnonzero(chosen).tolist():
                 self.envs[k].reset(seed=seeds[k], options=options or None)
@@ -259,15 +259,15 @@ class TaskAllocVectorEnv:
         unresolved: list[str | None] = [None] * k_count
         for k in np.flatnonzero(truncations).tolist():
             unresolved[k] = UNRESOLVED_TEXT[int(b.istate[k, batch.UNRESOLVED])]
-        b.observe(stepping, self._obs, self._masks)
+        b.observe(stepping, self._masks)
         ended = terminations | truncations
         finals = None
         if self.autoreset_mode == "same_step":
             finals = self._final_arrays(ended, unresolved)
             if ended.any():
-                self._restart(ended, [None] * k_count, None)
+                self._restart(ended, [None] * k_count)
         if restarted.any():
-            self._restart(restarted, [None] * k_count, None)
+            self._restart(restarted, [None] * k_count)
         self._ended = ended & (self.autoreset_mode != "same_step")
         infos = self._infos(invalid, unresolved)
         if finals is not None:
@@ -288,15 +288,15 @@ class TaskAllocVectorEnv:
         return {"final_obs": {"observation": obs, "action_mask": masks}, "final_state": states,
                 "final_info": info, "_final": ended.copy()}
 
-    def _restart(self, chosen: np.ndarray, seeds: Sequence[int | None], options: dict | None) -> None:
+    def _restart(self, chosen: np.ndarray, seeds: Sequence[int | None]) -> None:
         """Reset the instances where ``chosen`` is set (each env draws its next instance in Python) and load them into
         the arrays engine, with their first observations."""
         b = self._batch
         for k in np.flatnonzero(chosen).tolist():
-            self.envs[k].reset(seed=seeds[k], options=options)
+            self.envs[k]._begin(seeds[k])             # TaskAllocEnv.reset takes no options of its own
             b.load(k, self.envs[k])
         b.score(chosen, np.zeros(self.num_envs, dtype=bool))
-        b.observe(chosen, self._obs, self._masks)
+        b.observe(chosen, self._masks)
 
     # -- actions -----------------------------------------------------------------------------------------------
     def _checked(self, actions: Any) -> np.ndarray:

@@ -68,8 +68,9 @@ def unsupported(cfg: TaskAllocConfig) -> str | None:
 class ArrayBatch:
     """The state of K instances as arrays and the compiled phases of their step; see the module docstring."""
 
-    def __init__(self, k: int, template: Any) -> None:
-        """Arrays for K instances shaped like ``template``'s (an unstarted ``TaskAllocEnv``)."""
+    def __init__(self, k: int, template: Any, obs: np.ndarray) -> None:
+        """Arrays for K instances shaped like ``template``'s (an unstarted ``TaskAllocEnv``); the observations are
+        written into ``obs`` (K, N, D), whose fixed columns are set when an instance starts."""
         cfg = template.config
         n, m = cfg.n_agents, cfg.n_tasks
         layout = template.observation_layout
@@ -109,7 +110,7 @@ class ArrayBatch:
         self.last_count, self.last_ids, self.last_values = z(n, m, dtype=i64), z(n, m, w, dtype=i64), z(n, m, w)
         self.last_bundles, self.last_bundle_len = z(n, m, dtype=i64), z(n, dtype=i64)
         self.last_heard, self.sent_by = z(n, n, dtype=i64), z(n, dtype=i64)
-        self.passed, self.dirty = z(n, dtype=b), z(n, dtype=b)
+        self.passed, self.dirty, self.stale = z(n, dtype=b), z(n, dtype=b), z(n, dtype=b)   # paths, view rows
         self.gain, self.slot = z(n, m), z(n, m, dtype=i64)
         self.pt_members, self.pt_reward, self.pt_start, self.pt_cost = z(n, m, dtype=b), z(n, m), z(n, m), z(n)
         self.view_bid, self.outbid, self.eligible, self.prereqs_met = z(n, m), z(n, m, dtype=b), z(n, m, dtype=b), \
@@ -124,7 +125,12 @@ class ArrayBatch:
         self.required, self.agent_eq = z(m, e, dtype=i64), z(n, e, dtype=b)
         self.equipment_match, self.fillable, self.prereqs = z(n, m, dtype=b), z(m, dtype=b), z(m, m, dtype=b)
         self.adjacency, self.component = z(n, n, dtype=b), z(n, dtype=i64)
-        self.own_features, self.tasks = z(n, self.own_size), z(n, m, self.task_size)
+        # views into the observations: the own columns (K, N, own) and the task blocks (K, N, M, F)
+        self.obs = obs
+        self.own_features = obs[:, :, :self.own_size]
+        self.tasks = obs[:, :, self.own_size:].reshape(k, n, m, self.task_size)
+        if not np.shares_memory(self.tasks, obs):
+            raise ValueError("the task blocks must be a view into the observations")
         self.state_static = z(template.state_space.shape[0] - n * m - 1)       # state_vector before the bids
         self.rngs: list[np.random.Generator | None] = [None] * k
         self.keep = np.ones((k, n * n), dtype=bool)
@@ -146,7 +152,7 @@ class ArrayBatch:
         self.pending[k] = False
         self.last_heard[k], self.sent_by[k] = 0, 0
         self.passed[k] = env._engine.passed
-        self.dirty[k] = True                       # every path is timed (empty) before the first view
+        self.dirty[k] = self.stale[k] = True      # every path is timed (empty) and every row viewed at the start
         self.pt_members[k], self.pt_reward[k], self.pt_start[k], self.pt_cost[k] = False, 0.0, np.inf, 0.0
         self.gain[k], self.slot[k] = 0.0, -1
         self.istate[k] = 0
@@ -170,9 +176,7 @@ class ArrayBatch:
         self.equipment_match[k], self.fillable[k] = p.equipment_match, p.fillable & p.released
         self.prereqs[k] = s.task_prereqs
         self.adjacency[k], self.component[k] = graph.adjacency, graph.component
-        buffer = env._builder._buffer
-        self.own_features[k] = buffer[:, :self.own_size]
-        self.tasks[k] = buffer[:, self.own_size:].reshape(self.n, self.m, self.task_size)
+        self.obs[k] = env._builder._buffer        # the fixed columns, in the observations' dtype (as ``_finish``)
         self.rngs[k] = p.network.rng
         self.state_static[k] = state_vector(p)[:self.state_static.shape[1]]
 
@@ -211,8 +215,8 @@ class ArrayBatch:
         (the losses drawn from each instance's generator, as ``IndependentLoss.lost`` draws them), score."""
         batch.apply_actions(which, actions, self.every_step, self.by_bundle, self.until_joined, self.leg_cost,
                             self.arrival_time, self.frozen, self.istate, self.fstate, self.passed, self.dirty,
-                            self.bundles, self.bundle_len, self.paths, self.path_len, self.assigned_at, self.quit,
-                            self.quit_blocked, self.pending, self.count, self.ids, self.values, self.own,
+                            self.stale, self.bundles, self.bundle_len, self.paths, self.path_len, self.assigned_at,
+                            self.quit, self.quit_blocked, self.pending, self.count, self.ids, self.values, self.own,
                             self.capacity, self.view_bid, self.slot, self.displaced, self.speed, self.dist_at,
                             self.dist_tt, self.earliest, self.deadline, self.doable, self.duration, self.task_start,
                             self.pay, self.gain, self.pt_members, self.pt_reward, self.pt_start, self.pt_cost)
@@ -222,8 +226,8 @@ class ArrayBatch:
                 self.keep[k, :links[k]] = ~(self.rngs[k].random(int(links[k])) < self.loss)
         batch.end_rounds(self.istate, self.statics, self.perfect, self.by_bundle, self.canonical, self.task_quitting,
                          self.delta, self.reset_on_additions, self.keep, self.assigned_at, self.quit,
-                         self.quit_blocked, self.pending, self.passed, self.dirty, self.count, self.ids, self.values,
-                         self.own, self.stamps, self.known,
+                         self.quit_blocked, self.pending, self.passed, self.dirty, self.stale, self.count, self.ids,
+                         self.values, self.own, self.stamps, self.known,
                          self.bundles, self.bundle_len, self.paths, self.path_len, self.last_count, self.last_ids,
                          self.last_values, self.last_bundles, self.last_bundle_len, self.last_heard, self.sent_by,
                          self.adjacency, self.component, self.single, self.capacity, self.restricted, self.required,
@@ -239,16 +243,16 @@ class ArrayBatch:
                         self.pt_reward, self.pt_start, self.pt_cost, self.capacity, self.required, self.agent_eq,
                         self.prereqs)
 
-    def observe(self, which: np.ndarray, obs: np.ndarray, masks: np.ndarray) -> None:
-        """The observations and masks of the instances in ``which``, written into rows of ``obs`` and ``masks``."""
+    def observe(self, which: np.ndarray, masks: np.ndarray) -> None:
+        """The observations of the instances in ``which`` (their rows of ``obs``) and their rows of ``masks``."""
         batch.observe_all(which, self.prereq_mode, self.warping, self.strict, self.silence_column,
                           self.task_quitting, self.delta, self.columns, self.istate, self.fstate, self.statics,
-                          self.passed, self.count, self.ids, self.values, self.own, self.stamps, self.assigned_at,
-                          self.quit, self.quit_blocked, self.bundle_len, self.single, self.gain,
+                          self.passed, self.stale, self.count, self.ids, self.values, self.own, self.stamps,
+                          self.assigned_at, self.quit, self.quit_blocked, self.bundle_len, self.single, self.gain,
                           self.equipment_match, self.fillable, self.capacity, self.restricted, self.required,
                           self.agent_eq, self.prereqs, self.view_bid, self.outbid, self.eligible, self.prereqs_met,
                           self.members, self.group_total, self.lowest_bid, self.displaced, self.displaced_bid,
-                          self.in_bundle, self.tasks, self.own_features, obs, masks)
+                          self.in_bundle, self.tasks, self.own_features, masks)
 
     # -- outputs -------------------------------------------------------------------------------------------------------
     def figures(self) -> dict[str, np.ndarray]:

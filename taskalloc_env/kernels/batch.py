@@ -83,7 +83,7 @@ def pairwise_sum(a: np.ndarray, n: int) -> float:
 @jit
 def apply_actions(which: np.ndarray, actions: np.ndarray, every_step: bool, by_bundle: bool, until_joined: bool,
                   leg_cost: bool, arrival_time: bool, frozen: bool, istate: np.ndarray, fstate: np.ndarray,
-                  passed: np.ndarray, dirty: np.ndarray, bundles: np.ndarray, bundle_len: np.ndarray,
+                  passed: np.ndarray, dirty: np.ndarray, stale: np.ndarray, bundles: np.ndarray, bundle_len: np.ndarray,
                   paths: np.ndarray, path_len: np.ndarray, assigned_at: np.ndarray, quit: np.ndarray,
                   quit_blocked: np.ndarray, pending: np.ndarray, count: np.ndarray, ids: np.ndarray,
                   values: np.ndarray, own: np.ndarray, capacity: np.ndarray, view_bid: np.ndarray, slot: np.ndarray,
@@ -124,7 +124,7 @@ def apply_actions(which: np.ndarray, actions: np.ndarray, every_step: bool, by_b
                 quit_blocked[k, i, j] = until_joined
                 istate[k, QUITS] += 1
                 pending[k, i, j] = True
-                dirty[k, i] = True
+                dirty[k, i] = stale[k, i] = True
                 passed[k, i] = False
                 continue
             j = action - 1                                   # actions.encode_bid(j) = 1 + j
@@ -142,7 +142,7 @@ def apply_actions(which: np.ndarray, actions: np.ndarray, every_step: bool, by_b
             assigned_at[k, i, j] = now
             istate[k, BIDS] += 1
             pending[k, i, j] = False                         # re-bid before anyone saw the quit
-            dirty[k, i] = True
+            dirty[k, i] = stale[k, i] = True
             passed[k, i] = False
         istate[k, STEPS] += 1
         everyone = True
@@ -186,12 +186,12 @@ def _release(i: int, lost: int, by_bundle: bool, bundles: np.ndarray, bundle_len
 def end_rounds(istate: np.ndarray, statics: np.ndarray, perfect: bool, by_bundle: bool, canonical: bool,
                task_quitting: bool, delta: int, reset_on_additions: bool, keep: np.ndarray, assigned_at: np.ndarray,
                quit: np.ndarray, quit_blocked: np.ndarray, pending: np.ndarray, passed: np.ndarray, dirty: np.ndarray,
-               count: np.ndarray, ids: np.ndarray, values: np.ndarray, own: np.ndarray, stamps: np.ndarray,
-               known: np.ndarray, bundles: np.ndarray, bundle_len: np.ndarray, paths: np.ndarray, path_len: np.ndarray,
-               last_count: np.ndarray, last_ids: np.ndarray, last_values: np.ndarray, last_bundles: np.ndarray,
-               last_bundle_len: np.ndarray, last_heard: np.ndarray, sent_by: np.ndarray, adjacency: np.ndarray,
-               component: np.ndarray, single: np.ndarray, capacity: np.ndarray, restricted: np.ndarray,
-               required: np.ndarray, agent_eq: np.ndarray) -> None:
+               stale: np.ndarray, count: np.ndarray, ids: np.ndarray, values: np.ndarray, own: np.ndarray,
+               stamps: np.ndarray, known: np.ndarray, bundles: np.ndarray, bundle_len: np.ndarray, paths: np.ndarray,
+               path_len: np.ndarray, last_count: np.ndarray, last_ids: np.ndarray, last_values: np.ndarray,
+               last_bundles: np.ndarray, last_bundle_len: np.ndarray, last_heard: np.ndarray, sent_by: np.ndarray,
+               adjacency: np.ndarray, component: np.ndarray, single: np.ndarray, capacity: np.ndarray,
+               restricted: np.ndarray, required: np.ndarray, agent_eq: np.ndarray) -> None:
     """``Protocol.end_round`` of every instance whose ``ENDS_ROUND`` is set: snapshot, send (``keep`` (K, links):
     the links' messages not lost, sender-major), deliver in (receiver, sender) order, merge (``exchange_all``),
     count the quits seen, forget silent agents (lossy links), release outbid tasks, the quit timers and blocks,
@@ -390,6 +390,7 @@ def end_rounds(istate: np.ndarray, statics: np.ndarray, perfect: bool, by_bundle
             istate[k, UNRESOLVED] = ROUND_BOUND
         for i in range(n):
             passed[k, i] = False
+            stale[k, i] = True                               # Protocol._touch(): the whole view
 
 
 @jit
@@ -478,21 +479,22 @@ def score_all(which: np.ndarray, stepped: np.ndarray, max_cycles: int, leg_cost:
 @jit
 def observe_all(which: np.ndarray, prereq_mode: int, warping: bool, strict: bool, silence_column: int,
                 task_quitting: bool, delta: int, columns: np.ndarray, istate: np.ndarray, fstate: np.ndarray,
-                statics: np.ndarray, passed: np.ndarray, count: np.ndarray, ids: np.ndarray, values: np.ndarray,
-                own: np.ndarray, stamps: np.ndarray, assigned_at: np.ndarray, quit: np.ndarray,
+                statics: np.ndarray, passed: np.ndarray, stale: np.ndarray, count: np.ndarray, ids: np.ndarray,
+                values: np.ndarray, own: np.ndarray, stamps: np.ndarray, assigned_at: np.ndarray, quit: np.ndarray,
                 quit_blocked: np.ndarray, bundle_len: np.ndarray,
                 single: np.ndarray, gain: np.ndarray, equipment_match: np.ndarray, fillable: np.ndarray,
                 capacity: np.ndarray, restricted: np.ndarray, required: np.ndarray, agent_eq: np.ndarray,
                 prereqs: np.ndarray, view_bid: np.ndarray, outbid: np.ndarray, eligible: np.ndarray,
                 prereqs_met: np.ndarray, members: np.ndarray, group_total: np.ndarray, lowest_bid: np.ndarray,
                 displaced: np.ndarray, displaced_bid: np.ndarray, in_bundle: np.ndarray, tasks: np.ndarray,
-                own_features: np.ndarray, obs: np.ndarray, masks: np.ndarray) -> None:
-    """``TaskAllocEnv._rows`` of each instance in ``which``: every row of its bid view (``bids.bid_rows``), the
+                own_features: np.ndarray, masks: np.ndarray) -> None:
+    """``TaskAllocEnv._rows`` of each instance in ``which``: the stale rows of its bid view (``bids.bid_rows``), the
     per-step observation columns (``observe.step_features``; ``member_silence`` at ``silence_column`` ≥ 0, as
-    ``ObservationBuilder._finish`` writes it), copied into ``obs`` (K, N, D) in its dtype, and the action masks
-    (``masks.fill_masks``)."""
+    ``ObservationBuilder._finish`` writes it) and the action masks (``masks.fill_masks``). ``tasks`` (K, N, M, F)
+    and ``own_features`` (K, N, ≥ 7) are views into the observations in their dtype: each value is computed in
+    float64 and rounded once when stored, as ``ObservationBuilder`` rounds its float64 buffer."""
     n_inst, n, m = gain.shape
-    rows = np.arange(n)
+    rows = np.zeros(n, dtype=np.int64)
     sizes = np.zeros(n, dtype=np.int64)
     sizes_float = np.zeros(n)
     can_bid = np.zeros((n, m), dtype=np.bool_)
@@ -501,14 +503,19 @@ def observe_all(which: np.ndarray, prereq_mode: int, warping: bool, strict: bool
     for k in range(n_inst):
         if not which[k]:
             continue
+        n_rows = 0
         for i in range(n):
             sizes[i] = bundle_len[k, i]
             sizes_float[i] = bundle_len[k, i]
-        bid_rows(rows, count[k], ids[k], values[k], single[k], gain[k], quit_blocked[k], sizes, equipment_match[k],
-                 fillable[k], everyone_known, capacity[k], restricted[k], required[k], agent_eq[k], prereqs[k],
-                 prereq_mode, statics[k, MAX_BUNDLE], warping, strict, view_bid[k], outbid[k], eligible[k],
-                 prereqs_met[k], members[k], group_total[k], lowest_bid[k], displaced[k], displaced_bid[k],
-                 in_bundle[k])
+            if stale[k, i]:
+                rows[n_rows] = i
+                n_rows += 1
+                stale[k, i] = False
+        bid_rows(rows[:n_rows], count[k], ids[k], values[k], single[k], gain[k], quit_blocked[k], sizes,
+                 equipment_match[k], fillable[k], everyone_known, capacity[k], restricted[k], required[k],
+                 agent_eq[k], prereqs[k], prereq_mode, statics[k, MAX_BUNDLE], warping, strict, view_bid[k],
+                 outbid[k], eligible[k], prereqs_met[k], members[k], group_total[k], lowest_bid[k], displaced[k],
+                 displaced_bid[k], in_bundle[k])
         for i in range(n):
             for j in range(m):
                 can_bid[i, j] = eligible[k, i, j] and outbid[k, i, j] and gain[k, i, j] > 0
@@ -533,11 +540,3 @@ def observe_all(which: np.ndarray, prereq_mode: int, warping: bool, strict: bool
                         quiet = max(quiet, value) if c > 0 else value
                     tasks[k, i, j, silence_column] = min(quiet, 1.0)
         fill_masks(can_bid, can_quit, can_quit, passed[k], masks[k])
-        own_size, task_size = own_features.shape[2], tasks.shape[3]
-        for i in range(n):
-            for c in range(own_size):
-                obs[k, i, c] = own_features[k, i, c]
-            for j in range(m):
-                at = own_size + j * task_size
-                for c in range(task_size):
-                    obs[k, i, at + c] = tasks[k, i, j, c]
