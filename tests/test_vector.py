@@ -11,6 +11,11 @@ seeding, the choice of engine and bad input.
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from helpers import examples
@@ -20,7 +25,7 @@ from test_properties import scenario_config
 
 import taskalloc_env
 from taskalloc.policies import make_policy
-from taskalloc_env import TaskAllocEnv
+from taskalloc_env import TaskAllocEnv, kernels
 from taskalloc_env.errors import ConfigError, InvalidActionError
 from taskalloc_env.vector import INFO_KEYS
 
@@ -240,6 +245,36 @@ def test_the_engines_agree_under_every_autoreset_mode(mode, kw):
             outputs = [v.reset(options={"reset_mask": ended}) for v in venvs]
             same_outputs(*outputs)
     assert ends >= 4
+
+
+BATCHED_EPISODES = """
+import numpy as np
+import taskalloc_env
+from taskalloc_env import kernels
+for kw in ({"scenario": "default"}, {"scenario": "default", "message_loss": 0.2}, {"scenario": "train_small"}):
+    venv = taskalloc_env.vector_env(4, **kw)
+    assert venv.engine == "arrays"
+    obs, _ = venv.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(60):
+        obs, *_ = venv.step((rng.random(obs["action_mask"].shape) * obs["action_mask"]).argmax(axis=2))
+print(kernels.NOTICE.compiles)
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not kernels.COMPILED, reason="numba is not installed")
+def test_the_arrays_engine_compiles_nothing_once_the_cache_is_warm(tmp_path):
+    env = {key: value for key, value in os.environ.items() if key != "NUMBA_CACHE_DIR"}
+    env["XDG_CACHE_HOME"] = str(tmp_path)
+
+    def compiles() -> int:
+        done = subprocess.run([sys.executable, "-c", BATCHED_EPISODES], cwd=Path(__file__).resolve().parents[1],
+                              env=env, capture_output=True, text=True, check=True)
+        return int(done.stdout.split()[-1])
+
+    assert compiles() > 0
+    assert compiles() == 0
 
 
 def test_the_engine_follows_the_options():
