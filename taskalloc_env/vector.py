@@ -14,9 +14,22 @@
     venv.state()                               # (K, S) for centralised critics
 
 Instance k is exactly a ``parallel_env`` seeded ``seed + k``: observations, masks, rewards, terminations, infos and
-the final allocation, step by step (``tests/test_vector.py``). Every instance runs the single env's step
-(``TaskAllocEnv._advance``: the step engine, ``engine.StepEngine``, one codec and one place that applies a joint
-action); the batch adds the array interface, the checks of a whole action array at once and the autoreset.
+the final allocation, step by step (``tests/test_vector.py``). Two engines step the instances (``venv.engine``):
+
+* ``"arrays"``: every instance's state held as (K, …) arrays and each phase of a step (apply the joint actions,
+  the consensus round, re-time the changed paths and score, observe) one compiled call over the instance axis
+  (``vector_arrays``, ``kernels.batch``), running the single env's rules through the same compiled kernels (the
+  merge, the bid rows, path timing, the paid groups, the observation features, the masks). Its scope: the
+  synchronous consensus (``consensus="sync"``, the default, and ``"every_step"``), perfect links or independent
+  message loss (``message_loss`` > 0 with ``loss_model="independent"``, no ``max_delay``), task quitting, any
+  scenario, scoring and bidding option, with no pop-up tasks, no ``release_actions`` and ``require_known_capacity``
+  off. A new instance is still drawn in Python at each reset (``TaskAllocEnv._begin``) and copied in.
+* ``"instances"``: each instance stepped in turn by the single env's step (``TaskAllocEnv._advance``: the step
+  engine, ``engine.StepEngine``); every other option.
+
+``engine="auto"`` (the default) takes ``"arrays"`` wherever its scope covers the options, else ``"instances"``;
+``engine="arrays"`` refuses options outside it, naming the first. ``docs/benchmarks.md`` gives the throughput of
+both. The batch adds the array interface, the checks of a whole action array at once and the autoreset.
 
 Autoreset (``autoreset_mode``):
 
@@ -32,8 +45,7 @@ Autoreset (``autoreset_mode``):
 
 Supported: every option of the single env except agent drop-outs and late joiners (``dropouts``,
 ``dropout_schedule``, ``join_at``: a failed agent leaves ``env.agents`` and a joiner enters it, which a fixed (K, N)
-layout cannot express) and rendering. Today each instance is
-stepped in turn by the single env's engine; ``docs/benchmarks.md`` gives the throughput this reaches.
+layout cannot express) and rendering.
 """
 
 from __future__ import annotations
