@@ -76,8 +76,7 @@ class ArrayBatch:
         layout = template.observation_layout
         e = layout.n_equipment
         w = max(min(template._max_agents_per_task, n), 1)
-        self.k, self.n, self.m, self.w = k, n, m, w
-        self.dtype = template.dtype
+        self.k, self.n, self.m = k, n, m
         self.own_size, self.task_size = layout.own_size, layout.task_size
         self.max_cycles = int(template.max_cycles)
         self.every_step = cfg.consensus == "every_step"
