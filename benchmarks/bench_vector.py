@@ -2,14 +2,18 @@
 
     python -m benchmarks.bench_vector                         # K = 1, 64, 256, 1024 on default and train_small
     python -m benchmarks.bench_vector --sizes 1 64 --seconds 2 --mappo-iterations 1     # a quick look
+    python -m benchmarks.bench_vector --phases 1024           # where a step's time goes, K = 1024
 
 Prints markdown tables:
 
 - env: agent-steps per CPU second with a random masked policy whose actions are drawn with array operations (one
   uniform draw per action, the arg-max over the allowed ones), for the single env (its dict API, one draw per agent:
-  the way a PettingZoo user steps it) and the batch at each K, each in a fresh subprocess so that its peak resident
-  memory (``ru_maxrss``) is its own; the ratio to the single env is measured in the same run. VMAS's
-  ``simple_spread`` at the same K when ``vmas`` is installed (``pip install vmas``).
+  the way a PettingZoo user steps it) and the batch at each K on both engines (``arrays``: the compiled step over the
+  instance axis; ``instances``: each env in turn), each in a fresh subprocess so that its peak resident memory
+  (``ru_maxrss``) is its own; the ratio to the single env is measured in the same run. VMAS's ``simple_spread`` at the
+  same K when ``vmas`` is installed (``pip install vmas``).
+- phases (``--phases K``): the arrays engine's CPU time per step by phase, on default and train_small: each compiled
+  phase, the loss draws, the resets (a new instance drawn in Python and loaded) and the rest (checks, outputs).
 - mappo: agent-steps per CPU second of the project's MAPPO loop (``training.mappo``: rollout collection and the PPO
   update with the pooling actor and the state critic, default config) with its copies stepped as separate envs and
   as one batched env, and the share of the time spent collecting rollouts (the rest is the PPO update).
@@ -36,6 +40,74 @@ from taskalloc_env.errors import run_cli
 
 SCENARIOS = ("default", "train_small")
 SIZES = (1, 64, 256, 1024)
+ENGINES = ("arrays", "instances")
+PHASES = ("apply_actions", "end_rounds", "score_all", "observe_all")
+
+
+def measure_phases(scenario: str, k: int, seconds: float) -> dict[str, float]:
+    """The arrays engine's CPU seconds per step in each phase (the compiled calls of ``kernels.batch``, the loss draws
+    in Python, the resets) and in the rest, over ``seconds`` of random masked steps."""
+    import taskalloc_env
+    from taskalloc_env import env as env_module
+    from taskalloc_env import vector_arrays
+    from taskalloc_env.kernels import batch
+
+    spent = dict.fromkeys((*PHASES, "loss draws", "resets", "rest"), 0.0)
+
+    def timed(name: str, function: Any) -> Any:
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            start = time.process_time()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                spent[name] += time.process_time() - start
+        return wrapper
+
+    class Draws:
+        """An instance's generator whose draws are timed."""
+
+        def __init__(self, generator: np.random.Generator) -> None:
+            self.random = timed("loss draws", generator.random)
+
+    def load(batch_: Any, k_: int, env: Any) -> None:
+        plain_load(batch_, k_, env)
+        batch_.rngs[k_] = Draws(batch_.rngs[k_])
+
+    name, _, loss = scenario.partition("+")
+    venv = taskalloc_env.vector_env(k, scenario=name, engine="arrays", message_loss=0.2 if loss else 0.0)
+    rng = np.random.default_rng(0)
+    obs, _ = venv.reset(seed=0)
+    venv._batch.rngs = [Draws(g) for g in venv._batch.rngs]
+    for name in PHASES:
+        setattr(batch, name, timed(name, getattr(batch, name)))
+    begin, plain_load = env_module.TaskAllocEnv._begin, vector_arrays.ArrayBatch.load
+    env_module.TaskAllocEnv._begin = timed("resets", begin)
+    vector_arrays.ArrayBatch.load = timed("resets", load)
+    steps, start = 0, time.process_time()
+    try:
+        while time.process_time() - start < seconds:
+            mask = obs["action_mask"]
+            obs, *_ = venv.step((rng.random(mask.shape) * mask).argmax(axis=2))
+            steps += 1
+    finally:
+        env_module.TaskAllocEnv._begin, vector_arrays.ArrayBatch.load = begin, plain_load
+    total = time.process_time() - start
+    spent["rest"] = total - sum(spent.values())
+    return {name: value / steps for name, value in spent.items()} | {"total": total / steps,
+                                                                       "agent_steps": steps * k * venv.n_agents,
+                                                                       "cpu": total}
+
+
+def phases_table(k: int, seconds: float) -> str:
+    rows = []
+    for scenario in (*SCENARIOS, "default+loss"):
+        r = in_subprocess("phases", scenario, k, seconds)
+        rate = r["agent_steps"] / r["cpu"]
+        cells = [f"{1e3 * r[name]:.2f} ({r[name] / r['total']:.0%})" for name in (*PHASES, "loss draws", "resets",
+                                                                                   "rest")]
+        rows.append([scenario, str(k), *cells, f"{1e3 * r['total']:.2f}", f"{rate:,.0f}"])
+    return markdown_table(["scenario", "K", *[f"{name} ms" for name in PHASES], "loss draws ms", "resets ms",
+                           "rest ms", "step ms", "agent-steps / CPU s"], rows)
 
 
 def measure_single(scenario: str, seconds: float) -> dict[str, Any]:
@@ -56,11 +128,11 @@ def measure_single(scenario: str, seconds: float) -> dict[str, Any]:
     return {"agent_steps": steps, "cpu": time.process_time() - start}
 
 
-def measure_batch(scenario: str, k: int, seconds: float) -> dict[str, Any]:
-    """The batch of K instances, actions drawn for all at once."""
+def measure_batch(scenario: str, k: int, seconds: float, engine: str = "arrays") -> dict[str, Any]:
+    """The batch of K instances on ``engine``, actions drawn for all at once."""
     import taskalloc_env
 
-    venv = taskalloc_env.vector_env(k, scenario=scenario)
+    venv = taskalloc_env.vector_env(k, scenario=scenario, engine=engine)
     rng = np.random.default_rng(0)
     obs, _ = venv.reset(seed=0)
     steps, start = 0, time.process_time()
@@ -91,10 +163,12 @@ def measure_vmas(k: int, seconds: float) -> dict[str, Any] | None:
 
 def one(kind: str, scenario: str, k: int, seconds: float) -> dict[str, Any] | None:
     """One measurement (in the calling process) with its peak resident memory."""
+    if kind == "phases":
+        return measure_phases(scenario, k, seconds)
     if kind == "single":
         result = measure_single(scenario, seconds)
-    elif kind == "batch":
-        result = measure_batch(scenario, k, seconds)
+    elif kind.startswith("batch:"):
+        result = measure_batch(scenario, k, seconds, kind.split(":")[1])
     else:
         result = measure_vmas(k, seconds)
     if result is not None:
@@ -114,10 +188,12 @@ def env_table(sizes: Sequence[int], seconds: float) -> str:
         single = in_subprocess("single", scenario, 1, seconds)
         base = single["agent_steps"] / single["cpu"]
         rows.append([scenario, "single env (dict API)", "1", f"{base:,.0f}", "1.0", f"{single['peak_mb']:.0f}"])
-        for k in sizes:
-            r = in_subprocess("batch", scenario, k, seconds)
-            rate = r["agent_steps"] / r["cpu"]
-            rows.append([scenario, "vector_env", str(k), f"{rate:,.0f}", f"{rate / base:.2f}", f"{r['peak_mb']:.0f}"])
+        for engine in ENGINES:
+            for k in sizes:
+                r = in_subprocess(f"batch:{engine}", scenario, k, seconds)
+                rate = r["agent_steps"] / r["cpu"]
+                rows.append([scenario, f"vector_env ({engine})", str(k), f"{rate:,.0f}", f"{rate / base:.1f}",
+                             f"{r['peak_mb']:.0f}"])
     for k in sizes:
         r = in_subprocess("vmas", "simple_spread", k, seconds)
         if r is None:
@@ -174,6 +250,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--seconds", type=float, default=5.0, help="CPU seconds per measurement")
     parser.add_argument("--mappo-copies", type=int, default=64)
     parser.add_argument("--mappo-iterations", type=int, default=3)
+    parser.add_argument("--phases", type=int, metavar="K", help="only the arrays engine's time by phase at K")
     parser.add_argument("--one", nargs=3, metavar=("KIND", "SCENARIO", "K"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.one:
@@ -181,6 +258,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         print(json.dumps(one(kind, scenario, int(k), args.seconds)))
         return
     print(f"machine: {machine()}\n")
+    if args.phases:
+        print(phases_table(args.phases, args.seconds))
+        return
     print(env_table(args.sizes, args.seconds), "\n", flush=True)
     print(mappo_table(args.mappo_copies, args.mappo_iterations))
 

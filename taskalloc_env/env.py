@@ -229,6 +229,14 @@ class TaskAllocEnv(ParallelEnv):
         return self._np_random
 
     def reset(self, seed: int | None = None, options: dict | None = None):
+        self._begin(seed)
+        observations = self._observations()
+        infos = self._infos({})
+        return observations, infos
+
+    def _begin(self, seed: int | None) -> None:
+        """``reset`` without the first observations and infos: draw the episode's instance and start its protocol
+        (the batched env's arrays engine starts an instance with it and observes it in its own arrays)."""
         if seed is not None:
             self._np_random, self._np_random_seed = seeding.np_random(seed)
         scenario = self.fixed_scenario or generate(self.config, self._np_random)
@@ -243,9 +251,6 @@ class TaskAllocEnv(ParallelEnv):
         self._last_score = 0.0
         self._return = 0.0
         self._done = False
-        observations = self._observations()
-        infos = self._infos({})
-        return observations, infos
 
     def step(self, actions: Mapping[str, Any]):
         if self._protocol is None:

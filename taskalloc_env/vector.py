@@ -14,9 +14,22 @@
     venv.state()                               # (K, S) for centralised critics
 
 Instance k is exactly a ``parallel_env`` seeded ``seed + k``: observations, masks, rewards, terminations, infos and
-the final allocation, step by step (``tests/test_vector.py``). Every instance runs the single env's step
-(``TaskAllocEnv._advance``: the step engine, ``engine.StepEngine``, one codec and one place that applies a joint
-action); the batch adds the array interface, the checks of a whole action array at once and the autoreset.
+the final allocation, step by step (``tests/test_vector.py``). Two engines step the instances (``venv.engine``):
+
+* ``"arrays"``: every instance's state held as (K, …) arrays and each phase of a step (apply the joint actions,
+  the consensus round, re-time the changed paths and score, observe) one compiled call over the instance axis
+  (``vector_arrays``, ``kernels.batch``), running the single env's rules through the same compiled kernels (the
+  merge, the bid rows, path timing, the paid groups, the observation features, the masks). Its scope: the
+  synchronous consensus (``consensus="sync"``, the default, and ``"every_step"``), perfect links or independent
+  message loss (``message_loss`` > 0 with ``loss_model="independent"``, no ``max_delay``), task quitting, any
+  scenario, scoring and bidding option, with no pop-up tasks, no ``release_actions`` and ``require_known_capacity``
+  off. A new instance is still drawn in Python at each reset (``TaskAllocEnv._begin``) and copied in.
+* ``"instances"``: each instance stepped in turn by the single env's step (``TaskAllocEnv._advance``: the step
+  engine, ``engine.StepEngine``); every other option.
+
+``engine="auto"`` (the default) takes ``"arrays"`` wherever its scope covers the options, else ``"instances"``;
+``engine="arrays"`` refuses options outside it, naming the first. ``docs/benchmarks.md`` gives the throughput of
+both. The batch adds the array interface, the checks of a whole action array at once and the autoreset.
 
 Autoreset (``autoreset_mode``):
 
@@ -32,8 +45,7 @@ Autoreset (``autoreset_mode``):
 
 Supported: every option of the single env except agent drop-outs and late joiners (``dropouts``,
 ``dropout_schedule``, ``join_at``: a failed agent leaves ``env.agents`` and a joiner enters it, which a fixed (K, N)
-layout cannot express) and rendering. Today each instance is
-stepped in turn by the single env's engine; ``docs/benchmarks.md`` gives the throughput this reaches.
+layout cannot express) and rendering.
 """
 
 from __future__ import annotations
@@ -51,11 +63,14 @@ from taskalloc_env.actions import PASS, describe
 from taskalloc_env.config import TaskAllocConfig
 from taskalloc_env.env import TaskAllocEnv
 from taskalloc_env.errors import ConfigError, InvalidActionError
+from taskalloc_env.kernels import batch
 from taskalloc_env.memory import available_memory, memory_estimate
 from taskalloc_env.observation import state_vector
 from taskalloc_env.scenario import Scenario
+from taskalloc_env.vector_arrays import UNRESOLVED_TEXT, ArrayBatch, unsupported
 
 AUTORESET_MODES = ("next_step", "same_step", "disabled")
+ENGINES = ("auto", "arrays", "instances")
 # the figures of every instance after each step, arrays of length K (``TaskAllocEnv._figures`` per instance)
 INFO_KEYS = {"score": np.float64, "valid_tasks": np.int64, "conflicts": np.int64, "round": np.int64,
              "messages": np.int64, "data_items": np.int64, "converged": np.bool_}
@@ -74,12 +89,15 @@ class TaskAllocVectorEnv:
     metadata: ClassVar[dict[str, Any]] = {"name": "taskalloc_vector_v0", "autoreset_modes": AUTORESET_MODES}
 
     def __init__(self, num_envs: int, scenario: str | Path | TaskAllocConfig | Mapping[str, Any] | Scenario = "default",
-                 autoreset_mode: str = "next_step", memory_limit_gb: float | None = None, **env_kwargs: Any) -> None:
+                 autoreset_mode: str = "next_step", memory_limit_gb: float | None = None, engine: str = "auto",
+                 **env_kwargs: Any) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
                 or not 1 <= num_envs <= MAX_NUM_ENVS:
             raise ConfigError(f"num_envs must be an integer in 1..{MAX_NUM_ENVS:,}, got {num_envs!r}")
         if autoreset_mode not in AUTORESET_MODES:
             raise ConfigError(f"autoreset_mode {autoreset_mode!r} is not one of {AUTORESET_MODES}")
+        if engine not in ENGINES:
+            raise ConfigError(f"engine {engine!r} is not one of {ENGINES}")
         for key in ("render_mode", "render_path", "mask_in_infos"):
             if env_kwargs.get(key):
                 raise ConfigError(f"{key}: the batched env does not render or copy masks into infos; "
@@ -115,8 +133,14 @@ class TaskAllocVectorEnv:
                                       dtype=template.state_space.dtype)
         self.invalid_action = template.invalid_action
         self.envs = [template] + [_clone(template) for _ in range(k - 1)]
+        outside = unsupported(cfg)
+        if engine == "arrays" and outside is not None:
+            raise ConfigError(f"engine='arrays' does not cover {outside}; use engine='auto' or 'instances'")
+        # which path steps the instances: the compiled arrays where the options allow, else each env in turn
+        self.engine = "instances" if engine == "instances" or outside is not None else "arrays"
         self._obs = np.zeros((k, n, d), dtype=box.dtype)
         self._masks = np.zeros((k, n, a), dtype=np.int8)
+        self._batch = ArrayBatch(k, template, self._obs) if self.engine == "arrays" else None
         self._ended = np.zeros(k, dtype=bool)            # the instance's episode ended at the last step
         self._started = False
 
@@ -145,9 +169,12 @@ class TaskAllocVectorEnv:
         options = dict(options or {})
         chosen = self._reset_mask(options.pop("reset_mask", None))
         seeds = self._seeds(seed)
-        for k in np.flatnonzero(chosen).tolist():
-            self.envs[k].reset(seed=seeds[k], options=options or None)
-            self._write_rows(k)
+        if self._batch is not None:
+            self._restart(chosen, seeds)
+        else:
+            for k in np.flatnonzero(chosen).tolist():
+                self.envs[k].reset(seed=seeds[k], options=options or None)
+                self._write_rows(k)
         self._ended &= ~chosen
         self._started = True
         return self._handed(), self._infos(np.zeros(self.num_envs, dtype=np.int64))
@@ -195,6 +222,8 @@ class TaskAllocVectorEnv:
                                      "'disabled')")
         if self.invalid_action == "raise" and invalid.any():
             self._raise_first(actions, valid)
+        if self._batch is not None:
+            return self._step_arrays(np.where(valid, actions, PASS), invalid)
         played = np.where(valid, actions, PASS).tolist()
         rewards = np.zeros(k_count, dtype=np.float64)
         terminations = np.zeros(k_count, dtype=bool)
@@ -226,6 +255,61 @@ class TaskAllocVectorEnv:
             infos.update(self._finals(finals, final))
         return self._handed(), np.repeat(rewards[:, None], n, axis=1), terminations, truncations, infos
 
+    def _step_arrays(self, played: np.ndarray, invalid: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray,
+                                                                             np.ndarray, np.ndarray,
+                                                                             dict[str, np.ndarray]]:
+        """``step`` on the arrays engine: the same outputs, each phase one compiled call over the instances."""
+        b, k_count = self._batch, self.num_envs
+        restarted = self._ended.copy()        # next-step autoreset (under "disabled" no instance has ended here)
+        stepping = ~restarted
+        invalid[restarted] = 0
+        b.istate[:, batch.INVALID] += invalid
+        b.step(played, stepping)
+        terminations = b.istate[:, batch.TERMINATED].astype(bool) & stepping
+        truncations = b.istate[:, batch.TRUNCATED].astype(bool) & stepping
+        rewards = np.where(stepping, b.fstate[:, batch.REWARD], 0.0)
+        unresolved: list[str | None] = [None] * k_count
+        for k in np.flatnonzero(truncations).tolist():
+            unresolved[k] = UNRESOLVED_TEXT[int(b.istate[k, batch.UNRESOLVED])]
+        b.observe(stepping, self._masks)
+        ended = terminations | truncations
+        finals = None
+        if self.autoreset_mode == "same_step":
+            finals = self._final_arrays(ended, unresolved)
+            if ended.any():
+                self._restart(ended, [None] * k_count)
+        if restarted.any():
+            self._restart(restarted, [None] * k_count)
+        self._ended = ended & (self.autoreset_mode != "same_step")
+        infos = self._infos(invalid, unresolved)
+        if finals is not None:
+            infos.update(finals)
+        return self._handed(), np.repeat(rewards[:, None], self.n_agents, axis=1), terminations, truncations, infos
+
+    def _final_arrays(self, ended: np.ndarray, unresolved: Sequence[str | None]) -> dict[str, Any]:
+        """The last observation, state and figures of the instances that ended this step (arrays engine)."""
+        rows = ended[:, None, None]
+        obs = np.where(rows, self._obs, np.zeros_like(self._obs))
+        masks = np.where(rows, self._masks, np.zeros_like(self._masks))
+        states = np.where(ended[:, None], self._batch.state(self.state_space.dtype), 0).astype(self.state_space.dtype)
+        figures = self._batch.figures()
+        info = {key: np.where(ended, figures[key], np.zeros(1, dtype=dtype)).astype(dtype)
+                for key, dtype in INFO_KEYS.items()}
+        info["unresolved"] = np.array([why if end else None for why, end in zip(unresolved, ended.tolist())],
+                                      dtype=object)
+        return {"final_obs": {"observation": obs, "action_mask": masks}, "final_state": states,
+                "final_info": info, "_final": ended.copy()}
+
+    def _restart(self, chosen: np.ndarray, seeds: Sequence[int | None]) -> None:
+        """Reset the instances where ``chosen`` is set (each env draws its next instance in Python) and load them into
+        the arrays engine, with their first observations."""
+        b = self._batch
+        for k in np.flatnonzero(chosen).tolist():
+            self.envs[k]._begin(seeds[k])             # TaskAllocEnv.reset takes no options of its own
+            b.load(k, self.envs[k])
+        b.score(chosen, np.zeros(self.num_envs, dtype=bool))
+        b.observe(chosen, self._masks)
+
     # -- actions -----------------------------------------------------------------------------------------------
     def _checked(self, actions: Any) -> np.ndarray:
         """``actions`` as a (K, N) int64 array; a wrong shape or dtype is one line naming what was given."""
@@ -253,6 +337,8 @@ class TaskAllocVectorEnv:
         if not 0 <= action < a:
             raise InvalidActionError(f"instance {k}: action {action} of {agent} is outside Discrete({a})")
         env = self.envs[k]
+        if self._batch is not None:
+            self._batch.sync(k, env)
         raise InvalidActionError(f"instance {k}: action {action} ({describe(action, self.n_tasks)}) of {agent} is "
                                  f"not allowed by its mask: {env._why_masked(agent, action)}")
 
@@ -267,10 +353,16 @@ class TaskAllocVectorEnv:
         return {"observation": self._obs.copy(), "action_mask": self._masks.copy()}
 
     def _infos(self, invalid: np.ndarray, unresolved: Sequence[str | None] | None = None) -> dict[str, np.ndarray]:
-        rows = [env._figures() for env in self.envs]
-        infos = {key: np.array([row[key] for row in rows], dtype=dtype) for key, dtype in INFO_KEYS.items()}
+        if self._batch is not None:
+            figures = self._batch.figures()
+            infos = {key: figures[key].astype(dtype) for key, dtype in INFO_KEYS.items()}
+            passed = self._batch.passed.copy()
+        else:
+            rows = [env._figures() for env in self.envs]
+            infos = {key: np.array([row[key] for row in rows], dtype=dtype) for key, dtype in INFO_KEYS.items()}
+            passed = np.stack([env._engine.passed for env in self.envs])
         infos["invalid_actions"] = invalid.astype(np.int64)
-        infos["passed"] = np.stack([env._engine.passed for env in self.envs])
+        infos["passed"] = passed
         infos["unresolved"] = np.array(unresolved if unresolved is not None else [None] * self.num_envs,
                                        dtype=object)
         return infos
@@ -295,10 +387,14 @@ class TaskAllocVectorEnv:
         """(K, S) the global state of every instance (``observation.state_vector``)."""
         if not self._started:
             raise RuntimeError("call reset() before state()")
+        if self._batch is not None:
+            return self._batch.state(self.state_space.dtype)
         return np.stack([state_vector(env.protocol) for env in self.envs]).astype(self.state_space.dtype)
 
     def evaluate(self, k: int) -> Any:
         """Instance k's allocation as it stands (``TaskAllocEnv.evaluate``)."""
+        if self._batch is not None:
+            self._batch.sync(k, self.envs[k])
         return self.envs[k].evaluate()
 
     def close(self) -> None:

@@ -4,11 +4,17 @@ The equality property drives K single envs and the batch with the same joint act
 single envs' own observations (random masked, CBGABI, a committed learned policy; now and then an action outside the
 mask), over random scenarios and options (both synchronous consensus modes and the asynchronous one; perfect, lossy,
 bursty, fading and delayed links; pop-up tasks; release actions), across autoresets, and compares observations,
-masks, rewards, flags, infos, states and the final allocations byte for byte. Then the autoreset modes, seeding and
-bad input.
+masks, rewards, flags, infos, states and the final allocations byte for byte, on both engines (``arrays``: the
+compiled step over the instance axis, within its scope; ``instances``: each env in turn). Then the autoreset modes,
+seeding, the choice of engine and bad input.
 """
 
 from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,7 +25,7 @@ from test_properties import scenario_config
 
 import taskalloc_env
 from taskalloc.policies import make_policy
-from taskalloc_env import TaskAllocEnv
+from taskalloc_env import TaskAllocEnv, kernels
 from taskalloc_env.errors import ConfigError, InvalidActionError
 from taskalloc_env.vector import INFO_KEYS
 
@@ -48,6 +54,18 @@ def batch_options(draw) -> dict:
         kw["popup_tasks"] = 1
     if draw(st.integers(0, 4)) == 0:
         kw["release_actions"] = True
+    return kw
+
+
+@st.composite
+def arrays_options(draw) -> dict:
+    """Options inside the arrays engine's scope: both synchronous modes, perfect or lossy links, limited range."""
+    kw = draw(scenario_config(small=True))
+    network = draw(st.sampled_from(["perfect", "lossy", "range", "lossy_range"]))
+    if network.startswith("lossy"):
+        kw["message_loss"] = draw(st.sampled_from([0.1, 0.4]))
+    if network.endswith("range"):
+        kw["comm_range"] = draw(st.floats(0.5, 4.0))
     return kw
 
 
@@ -131,11 +149,13 @@ def check_instance(k: int, env: TaskAllocEnv, single: tuple, batch: tuple) -> No
     assert b_infos["unresolved"][k] == first.get("unresolved")
 
 
-def run_equal(kw: dict, policy_name: str, seed: int, steps: int, slip: float = 0.05) -> int:
-    """Drive the batch and the single envs together for ``steps`` steps; returns the episodes that ended."""
+def run_equal(kw: dict, policy_name: str, seed: int, steps: int, slip: float = 0.05, engine: str = "auto") -> int:
+    """Drive the batch (on ``engine``) and the single envs together for ``steps`` steps; returns the episodes that
+    ended."""
     if policy_name != "random":
         kw = {**kw, **make_policy(policy_name).env_overrides}
-    venv = taskalloc_env.vector_env(K, **kw)
+    venv = taskalloc_env.vector_env(K, engine=engine, **kw)
+    assert engine == "auto" or venv.engine == engine
     driver = Driver(kw, policy_name, seed, slip)
     b_obs, b_infos = venv.reset(seed=seed)
     for k, env in enumerate(driver.envs):
@@ -163,14 +183,109 @@ def test_instance_k_is_the_single_env_seeded_seed_plus_k(policy_name, kw, seed):
     run_equal(kw, policy_name, seed, steps=60)
 
 
+@pytest.mark.parametrize("policy_name", ["random", "cbgabi"])
+@given(kw=arrays_options(), seed=st.integers(0, 10_000))
+@settings(max_examples=examples(60), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_the_arrays_engine_is_the_single_env(policy_name, kw, seed):
+    run_equal(kw, policy_name, seed, steps=60, engine="arrays")
+
+
 @pytest.mark.slow
-def test_equal_under_a_learned_policy_across_autoresets():
-    ended = run_equal({"scenario": "train_small"}, "learned:train_small", seed=7, steps=120, slip=0.0)
+@pytest.mark.parametrize("engine", ["arrays", "instances"])
+def test_equal_under_a_learned_policy_across_autoresets(engine):
+    ended = run_equal({"scenario": "train_small"}, "learned:train_small", seed=7, steps=120, slip=0.0, engine=engine)
     assert ended >= K                     # every instance went through at least one autoreset
 
 
-def test_equal_on_the_default_scenario_with_loss():
-    run_equal({"scenario": "default", "message_loss": 0.2}, "random", seed=1, steps=80, slip=0.02)
+@pytest.mark.parametrize("engine", ["arrays", "instances"])
+@pytest.mark.parametrize("policy_name, loss", [("random", 0.0), ("random", 0.2), ("cbgabi", 0.0), ("cbgabi", 0.2)])
+def test_equal_on_the_default_scenario(engine, policy_name, loss):
+    run_equal({"scenario": "default", "message_loss": loss}, policy_name, seed=1, steps=80, slip=0.02, engine=engine)
+
+
+def same_outputs(a, b) -> None:
+    """Two nested step or reset outputs (dicts, tuples, arrays) are equal byte for byte."""
+    if isinstance(a, dict):
+        assert a.keys() == b.keys()
+        for key in a:
+            same_outputs(a[key], b[key])
+    elif isinstance(a, tuple):
+        for x, y in zip(a, b, strict=True):
+            same_outputs(x, y)
+    else:
+        assert a.dtype == b.dtype and a.shape == b.shape
+        assert (a.tolist() == b.tolist()) if a.dtype == object else a.tobytes() == b.tobytes()
+
+
+@pytest.mark.parametrize("mode", ["next_step", "same_step", "disabled"])
+@pytest.mark.parametrize("kw", [{"scenario": "train_small", "task_quitting": True},
+                                {"scenario": "default", "message_loss": 0.3, "n_tasks": 8, "comm_range": 3.0}])
+def test_the_engines_agree_under_every_autoreset_mode(mode, kw):
+    """The arrays engine equals the instances engine (itself the single env, above) in every output, including the
+    final observations of same-step resets and the restarts of a reset mask, with actions outside the masks."""
+    venvs = [taskalloc_env.vector_env(4, engine=engine, autoreset_mode=mode, max_cycles=40, **kw)
+             for engine in ("arrays", "instances")]
+    outputs = [v.reset(seed=3) for v in venvs]
+    same_outputs(*outputs)
+    rng = np.random.default_rng(3)
+    ends = 0
+    for _ in range(150):
+        mask = outputs[0][0]["action_mask"]
+        actions = (rng.random(mask.shape) * mask).argmax(axis=2)
+        slip = rng.random(actions.shape) < 0.03
+        actions[slip] = rng.integers(0, mask.shape[2], int(slip.sum()))
+        outputs = [v.step(actions) for v in venvs]
+        same_outputs(*outputs)
+        assert venvs[0].state().tobytes() == venvs[1].state().tobytes()
+        ended = outputs[0][2] | outputs[0][3]
+        ends += int(ended.sum())
+        for k in np.flatnonzero(ended).tolist():
+            assert venvs[0].evaluate(k) == venvs[1].evaluate(k)
+        if mode == "disabled" and ended.any():
+            outputs = [v.reset(options={"reset_mask": ended}) for v in venvs]
+            same_outputs(*outputs)
+    assert ends >= 4
+
+
+BATCHED_EPISODES = """
+import numpy as np
+import taskalloc_env
+from taskalloc_env import kernels
+for kw in ({"scenario": "default"}, {"scenario": "default", "message_loss": 0.2}, {"scenario": "train_small"}):
+    venv = taskalloc_env.vector_env(4, **kw)
+    assert venv.engine == "arrays"
+    obs, _ = venv.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(60):
+        obs, *_ = venv.step((rng.random(obs["action_mask"].shape) * obs["action_mask"]).argmax(axis=2))
+print(kernels.NOTICE.compiles)
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not kernels.COMPILED, reason="numba is not installed")
+def test_the_arrays_engine_compiles_nothing_once_the_cache_is_warm(tmp_path):
+    env = {key: value for key, value in os.environ.items() if key != "NUMBA_CACHE_DIR"}
+    env["XDG_CACHE_HOME"] = str(tmp_path)
+
+    def compiles() -> int:
+        done = subprocess.run([sys.executable, "-c", BATCHED_EPISODES], cwd=Path(__file__).resolve().parents[1],
+                              env=env, capture_output=True, text=True, check=True)
+        return int(done.stdout.split()[-1])
+
+    assert compiles() > 0
+    assert compiles() == 0
+
+
+def test_the_engine_follows_the_options():
+    assert taskalloc_env.vector_env(2, scenario="default").engine == "arrays"
+    assert taskalloc_env.vector_env(2, scenario="default", message_loss=0.1).engine == "arrays"
+    assert taskalloc_env.vector_env(2, scenario="default", engine="instances").engine == "instances"
+    assert taskalloc_env.vector_env(2, scenario="train_small", consensus="acbba").engine == "instances"
+    with pytest.raises(ConfigError, match="engine='arrays' does not cover loss_model='gilbert_elliott'"):
+        taskalloc_env.vector_env(2, scenario="train_small", loss_model="gilbert_elliott", engine="arrays")
+    with pytest.raises(ConfigError, match="engine 'fast' is not one of"):
+        taskalloc_env.vector_env(2, scenario="train_small", engine="fast")
 
 
 @pytest.mark.slow
@@ -193,8 +308,9 @@ def play_until_an_end(venv, seed: int = 0):
     raise AssertionError("no episode ended")
 
 
-def test_next_step_autoreset_starts_the_next_episode_with_zero_reward():
-    venv = taskalloc_env.vector_env(2, scenario="train_small")
+@pytest.mark.parametrize("engine", ["arrays", "instances"])
+def test_next_step_autoreset_starts_the_next_episode_with_zero_reward(engine):
+    venv = taskalloc_env.vector_env(2, scenario="train_small", engine=engine)
     _, _, term, trunc, infos = play_until_an_end(venv)
     k = int(np.flatnonzero(term | trunc)[0])
     rounds_before = infos["round"][k]
@@ -207,9 +323,10 @@ def test_next_step_autoreset_starts_the_next_episode_with_zero_reward():
     assert infos2["invalid_actions"][k] == 0          # the ignored actions of a restarting instance count for nothing
 
 
-def test_same_step_autoreset_reports_the_final_observation_state_and_figures():
-    venv = taskalloc_env.vector_env(2, scenario="train_small", autoreset_mode="same_step")
-    single = taskalloc_env.vector_env(2, scenario="train_small")
+@pytest.mark.parametrize("engine", ["arrays", "instances"])
+def test_same_step_autoreset_reports_the_final_observation_state_and_figures(engine):
+    venv = taskalloc_env.vector_env(2, scenario="train_small", autoreset_mode="same_step", engine=engine)
+    single = taskalloc_env.vector_env(2, scenario="train_small", engine=engine)
     obs, _, term, trunc, infos = play_until_an_end(venv, seed=5)
     s_obs, _, s_term, s_trunc, s_infos = play_until_an_end(single, seed=5)
     assert np.array_equal(term, s_term) and np.array_equal(trunc, s_trunc)
@@ -278,8 +395,9 @@ def test_bad_action_arrays(actions, match):
         venv.step(actions)
 
 
-def test_invalid_actions_are_counted_under_noop_and_named_under_raise():
-    venv = taskalloc_env.vector_env(2, scenario="train_small")
+@pytest.mark.parametrize("engine", ["arrays", "instances"])
+def test_invalid_actions_are_counted_under_noop_and_named_under_raise(engine):
+    venv = taskalloc_env.vector_env(2, scenario="train_small", engine=engine)
     obs, _ = venv.reset(seed=0)
     actions = np.zeros((2, 4), dtype=np.int64)
     actions[1, 2] = obs["action_mask"].shape[2] + 5                  # outside Discrete(A)
@@ -287,7 +405,7 @@ def test_invalid_actions_are_counted_under_noop_and_named_under_raise():
     actions[0, 1] = masked[0]
     _, _, _, _, infos = venv.step(actions)
     assert infos["invalid_actions"].tolist() == [1, 1]
-    strict = taskalloc_env.vector_env(2, scenario="train_small", invalid_action="raise")
+    strict = taskalloc_env.vector_env(2, scenario="train_small", invalid_action="raise", engine=engine)
     strict.reset(seed=0)
     with pytest.raises(InvalidActionError, match=r"instance 0: action \d+ \(.*\) of uav_1 is not allowed by its mask"):
         strict.step(actions)
