@@ -58,7 +58,7 @@ from taskalloc.evaluation.seeds import TEST_SEEDS, VALIDATION_SEED_START
 from taskalloc.policies import checkpoint, make_policy
 from taskalloc.policies.base import Policy
 from taskalloc.policies.learned import LearnedPolicy, resolve
-from taskalloc.policies.networks import AttentionActor, PoolingActor, count_parameters
+from taskalloc.policies.networks import AttentionActor, PoolingActor, count_parameters, with_release_head
 from taskalloc.training.config import (
     check_at_least,
     check_protocol_options,
@@ -106,7 +106,8 @@ class MappoConfig:
     heads: int = opt(4, "attention heads (attention actor and critic)")
     layers: int = opt(2, "self-attention layers of the attention actor")
     init_from: str | None = opt(None, "start from a checkpoint's actor, and its critic when its folder holds "
-                                      "critic.safetensors (a run folder or a committed model's name)")
+                                      "critic.safetensors (a run folder or a committed model's name); an actor "
+                                      "without release logits may start one with them (releases start rare)")
     # PPO
     total_steps: int = opt(1_000_000, "agent steps (one agent's decision in one env step) to train for")
     n_steps: int = opt(64, "steps per env copy in one rollout")
@@ -340,11 +341,22 @@ class Evaluator:
 
 
 def load_weights(model: ActorCritic, source: str, hook: PartnerHook | None = None) -> list[str]:
-    """Start from a checkpoint's actor weights and, when its folder holds one, its critic (``init_from``)."""
+    """Start from a checkpoint's actor weights and, when its folder holds one, its critic (``init_from``); an actor
+    without release logits starts one with them (``with_release_head``: releases start rare)."""
     json_path = Path(str(resolve(source)))
     json_path = json_path / "model.json" if json_path.is_dir() else json_path.with_suffix(".json")
     source_checkpoint = checkpoint.load(json_path)
-    states = [("actor", model.actor, source_checkpoint.actor.state_dict())]
+    actor_state = source_checkpoint.actor.state_dict()
+    source_kinds, kinds = getattr(source_checkpoint.actor, "kinds", 2), getattr(model.actor, "kinds", 2)
+    if (source_kinds, kinds) == (2, 3):
+        try:
+            actor_state = with_release_head(model.actor, actor_state)
+        except ValueError as exc:
+            raise ConfigError(f"init_from {source}: {exc}") from None
+    elif source_kinds != kinds:
+        raise ConfigError(f"init_from {source}: its actor has release logits and this run has no release_actions; "
+                          "only an actor without them can start one with them")
+    states = [("actor", model.actor, actor_state)]
     if (json_path.parent / CRITIC_FILE).is_file():
         states.append(("critic", model.critic, load_file(str(json_path.parent / CRITIC_FILE))))
     for name, module, state in states:
