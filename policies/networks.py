@@ -53,12 +53,13 @@ def check_kinds(kinds: int) -> None:
         raise ValueError(f"kinds={kinds}: a task has 2 logits (bid, quit) or 3 (bid, quit, release)")
 
 
-def with_release_head(actor: nn.Module, state: Mapping[str, th.Tensor]) -> dict[str, th.Tensor]:
+def with_release_head(actor: nn.Module, state: Mapping[str, th.Tensor],
+                      bias: float = RELEASE_BIAS) -> dict[str, th.Tensor]:
     """The weights ``state`` of a two-kind actor, widened for ``actor``, the same network with release logits (ours).
 
-    Every weight is copied; the task head's output layer gains a release row of zero weights and a bias of
-    ``RELEASE_BIAS``, so the release logit starts as that constant whatever the observation and releases start rare,
-    while the pass, bid and quit logits are the source's. Any other difference is refused in one line."""
+    Every weight is copied; the task head's output layer gains a release row of zero weights and a bias of ``bias``
+    (``RELEASE_BIAS``), so the release logit starts as that constant whatever the observation and releases start
+    rare, while the pass, bid and quit logits are the source's. Any other difference is refused in one line."""
     if getattr(actor, "kinds", None) != 3:
         raise ValueError(f"with_release_head widens into an actor with release logits (kinds=3), not a "
                          f"{type(actor).__name__} with kinds={getattr(actor, 'kinds', None)}")
@@ -70,7 +71,7 @@ def with_release_head(actor: nn.Module, state: Mapping[str, th.Tensor]) -> dict[
     widened = {}
     for key, value in state.items():
         if key in (f"{head}.weight", f"{head}.bias") and value.shape[0] == 2 and own[key].shape[1:] == value.shape[1:]:
-            release = th.full_like(value[:1], RELEASE_BIAS) if key.endswith("bias") else th.zeros_like(value[:1])
+            release = th.full_like(value[:1], bias) if key.endswith("bias") else th.zeros_like(value[:1])
             value = th.cat([value, release])
         if value.shape != own[key].shape:
             raise ValueError(f"the source's {key} has shape {tuple(value.shape)}, this actor's "

@@ -60,7 +60,8 @@ def no_release_rows(obs: th.Tensor, masks: th.Tensor) -> tuple[th.Tensor, th.Ten
     return obs[keep], masks[keep]
 
 
-def assert_plays_as_source(source: th.nn.Module, warm: th.nn.Module, obs: th.Tensor, masks: th.Tensor) -> None:
+def assert_plays_as_source(source: th.nn.Module, warm: th.nn.Module, obs: th.Tensor, masks: th.Tensor,
+                           bias: float = RELEASE_BIAS) -> None:
     """Where no release is allowed the masked logits equal the source's; unmasked, every release logit is the
     constant and the other logits are the source's."""
     width = 1 + 2 * N_TASKS
@@ -71,7 +72,7 @@ def assert_plays_as_source(source: th.nn.Module, warm: th.nn.Module, obs: th.Ten
         everything = warm(obs, th.ones_like(masks))
         th.testing.assert_close(everything[:, :width], source(obs, th.ones_like(masks[:, :width])),
                                 rtol=1e-5, atol=1e-5)
-    assert th.equal(everything[:, width:], th.full_like(everything[:, width:], RELEASE_BIAS))
+    assert th.equal(everything[:, width:], th.full_like(everything[:, width:], bias))
 
 
 @pytest.mark.parametrize("network", ["pooling", "attention"])
@@ -108,7 +109,8 @@ def test_with_release_head_refuses_other_mismatches_in_one_line():
 
 def test_mappo_init_from_starts_the_release_run_from_the_committed_model(tmp_path):
     """``taskalloc mappo --config mappo_small_release --init-from mappo_small_pooling_1m`` (no updates): the saved
-    actor plays as the committed one with the release logit at the constant, and the critic is loaded too; a
+    actor plays as the committed one with the release logit at the constant (or at ``--release-bias``), and the
+    critic is loaded too; a
     release actor cannot start a run without release actions, nor a source of another width a release run."""
     summary = mappo.main(["--config", "mappo_small_release", "--init-from", "mappo_small_pooling_1m",
                           "--total-steps", "0", "--eval-episodes", "1", "--out-dir", str(tmp_path / "warm")])
@@ -116,6 +118,9 @@ def test_mappo_init_from_starts_the_release_run_from_the_committed_model(tmp_pat
     source, warm = checkpoint.load(MODELS / "mappo_small_pooling_1m").actor, checkpoint.load(tmp_path / "warm").actor
     assert warm.kinds == 3
     assert_plays_as_source(source, warm, *observations())
+    mappo.main(["--config", "mappo_small_release", "--init-from", "mappo_small_pooling_1m", "--release-bias", "-2",
+                "--total-steps", "0", "--eval-episodes", "1", "--out-dir", str(tmp_path / "warm2")])
+    assert_plays_as_source(source, checkpoint.load(tmp_path / "warm2").actor, *observations(), bias=-2.0)
     with pytest.raises(mappo.ConfigError, match=r"^init_from .*warm: its actor has release logits and this run has "
                                                 r"no release_actions; only an actor without them can start one with "
                                                 r"them$"):
