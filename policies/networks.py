@@ -26,6 +26,7 @@ architecture is plain JSON (``taskalloc.policies.checkpoint``). Training wraps t
 from __future__ import annotations
 
 import itertools
+from collections.abc import Mapping
 from typing import ClassVar
 
 import numpy as np
@@ -34,6 +35,7 @@ from torch import nn
 
 MASKED_LOGIT = -1e8
 KINDS = (2, 3)      # logits per task: bid and quit, or bid, quit and release (``release_actions``)
+RELEASE_BIAS = -4.0     # ours: a warm-started release logit (``with_release_head``), e^−4 ≈ 2 % of a zero logit's odds
 
 
 def mlp(sizes: list[int], activate_last: bool = True) -> nn.Sequential:
@@ -49,6 +51,33 @@ def check_kinds(kinds: int) -> None:
     """Refuse a number of logits per task other than 2 or 3 (``KINDS``)."""
     if kinds not in KINDS:
         raise ValueError(f"kinds={kinds}: a task has 2 logits (bid, quit) or 3 (bid, quit, release)")
+
+
+def with_release_head(actor: nn.Module, state: Mapping[str, th.Tensor],
+                      bias: float = RELEASE_BIAS) -> dict[str, th.Tensor]:
+    """The weights ``state`` of a two-kind actor, widened for ``actor``, the same network with release logits (ours).
+
+    Every weight is copied; the task head's output layer gains a release row of zero weights and a bias of ``bias``
+    (``RELEASE_BIAS``), so the release logit starts as that constant whatever the observation and releases start
+    rare, while the pass, bid and quit logits are the source's. Any other difference is refused in one line."""
+    if getattr(actor, "kinds", None) != 3:
+        raise ValueError(f"with_release_head widens into an actor with release logits (kinds=3), not a "
+                         f"{type(actor).__name__} with kinds={getattr(actor, 'kinds', None)}")
+    head = next(name for name, module in actor.named_modules() if module is actor.task_head[-1])
+    own = actor.state_dict()
+    if set(state) != set(own):
+        raise ValueError(f"the source does not fit this {actor.name} actor: weights "
+                         f"{sorted(set(state) ^ set(own))[:3]} differ")
+    widened = {}
+    for key, value in state.items():
+        if key in (f"{head}.weight", f"{head}.bias") and value.shape[0] == 2 and own[key].shape[1:] == value.shape[1:]:
+            release = th.full_like(value[:1], bias) if key.endswith("bias") else th.zeros_like(value[:1])
+            value = th.cat([value, release])
+        if value.shape != own[key].shape:
+            raise ValueError(f"the source's {key} has shape {tuple(value.shape)}, this actor's "
+                             f"{tuple(own[key].shape)} (hidden, heads and layers must match)")
+        widened[key] = value.clone()
+    return widened
 
 
 def task_logits(pass_logit: th.Tensor, per_task: th.Tensor, mask: th.Tensor, name: str) -> th.Tensor:

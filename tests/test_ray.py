@@ -67,3 +67,24 @@ def test_ray_backend_writes_the_local_backends_tables(tmp_path, local_ray):
                  "exp/fig5_16_l4/episodes.csv"):
         assert (tmp_path / "local" / name).read_bytes() == (tmp_path / "ray" / name).read_bytes(), name
     assert "learned (train_small)" in (tmp_path / "ray" / "compare.md").read_text()
+
+
+@pytest.mark.parametrize("release", [False, True])
+def test_the_rllib_module_has_release_logits_where_the_environment_has_release_actions(release):
+    """The module's actor has the environment's kinds (3 with release actions), so its logits fill the action space."""
+    import argparse
+
+    from taskalloc.training import rllib_ppo
+
+    overrides = {"task_quitting": True, "delta": 1, "release_actions": release}
+    args = argparse.Namespace(scenario="train_small", set={}, env_overrides=overrides, max_cycles=200,
+                              network="pooling", hidden=16, env_runners=0, envs_per_runner=1, train_batch=128,
+                              minibatch=64, epochs=1, lr=3e-4, seed=0)
+    ppo, config = rllib_ppo.build_config(args)
+    env = rllib_ppo.make_env(config)
+    agent = sorted(env.get_agent_ids())[0]
+    spec = ppo.rl_module_spec.rl_module_specs[rllib_ppo.MODULE_ID]
+    spec.observation_space, spec.action_space = env.observation_space[agent], env.action_space[agent]
+    module = spec.build()
+    assert module.actor.kinds == (3 if release else 2)
+    assert module.actor.action_width(8) == spec.action_space.n == (25 if release else 17)

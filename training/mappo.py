@@ -58,7 +58,13 @@ from taskalloc.evaluation.seeds import TEST_SEEDS, VALIDATION_SEED_START
 from taskalloc.policies import checkpoint, make_policy
 from taskalloc.policies.base import Policy
 from taskalloc.policies.learned import LearnedPolicy, resolve
-from taskalloc.policies.networks import AttentionActor, PoolingActor, count_parameters
+from taskalloc.policies.networks import (
+    RELEASE_BIAS,
+    AttentionActor,
+    PoolingActor,
+    count_parameters,
+    with_release_head,
+)
 from taskalloc.training.config import (
     check_at_least,
     check_protocol_options,
@@ -106,7 +112,10 @@ class MappoConfig:
     heads: int = opt(4, "attention heads (attention actor and critic)")
     layers: int = opt(2, "self-attention layers of the attention actor")
     init_from: str | None = opt(None, "start from a checkpoint's actor, and its critic when its folder holds "
-                                      "critic.safetensors (a run folder or a committed model's name)")
+                                      "critic.safetensors (a run folder or a committed model's name); an actor "
+                                      "without release logits may start one with them (releases start rare)")
+    release_bias: float = opt(RELEASE_BIAS, "the release logit's bias when init_from widens an actor without "
+                                            "release logits (ours; the default keeps releases rare at the start)")
     # PPO
     total_steps: int = opt(1_000_000, "agent steps (one agent's decision in one env step) to train for")
     n_steps: int = opt(64, "steps per env copy in one rollout")
@@ -339,12 +348,24 @@ class Evaluator:
         return ratios
 
 
-def load_weights(model: ActorCritic, source: str, hook: PartnerHook | None = None) -> list[str]:
-    """Start from a checkpoint's actor weights and, when its folder holds one, its critic (``init_from``)."""
+def load_weights(model: ActorCritic, source: str, hook: PartnerHook | None = None,
+                 release_bias: float = RELEASE_BIAS) -> list[str]:
+    """Start from a checkpoint's actor weights and, when its folder holds one, its critic (``init_from``); an actor
+    without release logits starts one with them (``with_release_head``, its release logit at ``release_bias``)."""
     json_path = Path(str(resolve(source)))
     json_path = json_path / "model.json" if json_path.is_dir() else json_path.with_suffix(".json")
     source_checkpoint = checkpoint.load(json_path)
-    states = [("actor", model.actor, source_checkpoint.actor.state_dict())]
+    actor_state = source_checkpoint.actor.state_dict()
+    source_kinds, kinds = getattr(source_checkpoint.actor, "kinds", 2), getattr(model.actor, "kinds", 2)
+    if (source_kinds, kinds) == (2, 3):
+        try:
+            actor_state = with_release_head(model.actor, actor_state, release_bias)
+        except ValueError as exc:
+            raise ConfigError(f"init_from {source}: {exc}") from None
+    elif source_kinds != kinds:
+        raise ConfigError(f"init_from {source}: its actor has release logits and this run has no release_actions; "
+                          "only an actor without them can start one with them")
+    states = [("actor", model.actor, actor_state)]
     if (json_path.parent / CRITIC_FILE).is_file():
         states.append(("critic", model.critic, load_file(str(json_path.parent / CRITIC_FILE))))
     for name, module, state in states:
@@ -406,7 +427,7 @@ def main(argv: Sequence[str] | None = None, hook: PartnerHook | None = None) -> 
     actor = make_actor(cfg, layout.own_size, layout.task_size, groups[0].kinds)
     model = ActorCritic(actor, StateCritic(layout.n_equipment, cfg.hidden, cfg.heads))
     if cfg.init_from:
-        summary["init_from"] = load_weights(model, cfg.init_from, hook)
+        summary["init_from"] = load_weights(model, cfg.init_from, hook, cfg.release_bias)
     optimizer = th.optim.Adam(model.parameters(), lr=cfg.learning_rate, eps=1e-5)
     summary["parameters"] = {"actor": count_parameters(model.actor), "critic": count_parameters(model.critic)}
     evaluator = Evaluator(groups, cfg, out_dir / "eval.csv")

@@ -22,13 +22,14 @@ class TaskAllocRLModule(TorchRLModule, ValueFunctionAPI):
     """Masked logits from a project actor network; values from a pooling encoder of the same observation.
 
     ``model_config``: ``network`` (attention | pooling), ``hidden``, ``own_features`` and ``task_features`` (the
-    observation layout's names, which size the networks and travel into the exported checkpoint).
+    observation layout's names, which size the networks and travel into the exported checkpoint) and ``kinds``
+    (logits per task: 3 where the environment has release actions; 2 when absent, as in checkpoints from before it).
     """
 
     def setup(self) -> None:
         cfg = self.model_config
         own_size, task_size, hidden = len(cfg["own_features"]), len(cfg["task_features"]), int(cfg["hidden"])
-        self.actor = NETWORKS[cfg["network"]](own_size, task_size, hidden)
+        self.actor = NETWORKS[cfg["network"]](own_size, task_size, hidden, kinds=int(cfg.get("kinds", 2)))
         for layer in self.actor.output_layers():        # a near-uniform initial policy
             nn.init.orthogonal_(layer.weight, gain=0.01)
             nn.init.zeros_(layer.bias)

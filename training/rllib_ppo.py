@@ -70,9 +70,10 @@ def build_config(args: argparse.Namespace) -> tuple[PPOConfig, dict[str, Any]]:
 
     register_env(ENV_NAME, make_env)
     config = env_config(args.scenario, args.set, args.env_overrides, args.max_cycles)
-    layout = TaskAllocEnv(**config).observation_layout
+    probe = TaskAllocEnv(**config)
+    layout = probe.observation_layout
     model_config = {"network": args.network, "hidden": args.hidden, "own_features": list(layout.own_names),
-                    "task_features": list(layout.task_names)}
+                    "task_features": list(layout.task_names), "kinds": 3 if probe.config.release_actions else 2}
     ppo = (
         PPOConfig()
         .environment(ENV_NAME, env_config=config)
