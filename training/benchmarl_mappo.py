@@ -4,13 +4,13 @@
 
 BenchMARL (tested with 1.5.2) pins ``torchrl<0.12``: it lives in its own environment (``scripts/heavy_integrations.sh``
 creates one); the exported checkpoint loads without it. The run is BenchMARL's MAPPO as its user gets it
-(``MappoConfig.get_from_yaml()``, ``ExperimentConfig.get_from_yaml()``: 6000 frames per iteration, 45 passes of
+(``MappoConfig.get_from_yaml()``, ``ExperimentConfig.get_from_yaml()``: 6000 frames per iteration, 45 epochs of
 400-frame minibatches, lr 5e-5, a centralised critic on the global state, shared parameters), with these changes
-(``CHANGED``, also written to ``config.yaml``): the budget, gamma = 1 (the episode's return is its score, as in the
-project's MAPPO and SB3 runs), evaluation and rendering off, the csv logger only, one torch thread, and the actor
-``MlpConfig(num_cells=[256, 256], ReLU, Linear)``, which is layer for layer the project's ``MlpActor`` (``mlp``,
-hidden 256). The env is the suite task's config plus the protocol options the policy plays with (``--env-overrides``,
-default ``{task_quitting: true, delta: 1}`` as the other training stacks), through
+(``changed_from_benchmarl_defaults`` in ``config.yaml``): the budget, gamma = 1 (the episode's return is its score,
+as in the project's MAPPO and SB3 runs), evaluation and rendering off, the csv logger only, one torch thread, and the
+actor ``MlpConfig(num_cells=[256, 256], ReLU, Linear)``, which is layer for layer the project's ``MlpActor``
+(``mlp``, hidden 256). The env is the suite task's config plus the protocol options the policy plays with
+(``--env-overrides``, default ``{task_quitting: true, delta: 1}`` as the other training stacks), through
 ``taskalloc_env.wrappers.benchmarl.TaskAllocTask``.
 
 A frame is one env step of every agent: the budget ``--agent-steps`` is frames × agents. BenchMARL collects whole
