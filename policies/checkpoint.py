@@ -50,6 +50,7 @@ RUN_FIELDS = ("max_rounds", "message_ticks", "build_ticks", "separation_time")
 POLICY_OPTIONS = tuple(name for name in PROTOCOL_FIELDS
                        if FACTS[name].group not in RUN_GROUPS and name not in RUN_FIELDS)
 MAX_WEIGHT_BYTES = 8 * MAX_PARAMETERS + MAX_JSON_BYTES      # a safetensors file of that many float64 weights
+SAFETENSORS_DTYPES = {"float32": "F32", "float64": "F64", "int64": "I64"}    # what write_safetensors writes
 MAX_ZIP_MEMBERS = 64            # an SB3 zip holds a handful of entries (data, policy.pth, optimizer, versions)
 
 
@@ -72,8 +73,10 @@ class Checkpoint:
 def save(stem: str | Path, actor: Any, own_features: Sequence[str], task_features: Sequence[str],
          env_overrides: Mapping[str, Any], meta: Mapping[str, Any] | None = None) -> Path:
     """Write ``<stem>.json`` and ``<stem>.safetensors``; returns the JSON path."""
-    from safetensors.torch import save_file
-
+    try:
+        from safetensors.torch import save_file
+    except ModuleNotFoundError:             # an environment without safetensors (BenchMARL's, which exports here)
+        save_file = write_safetensors
     from taskalloc.policies.networks import NETWORKS
 
     if type(actor) not in NETWORKS.values():
@@ -94,6 +97,27 @@ def save(stem: str | Path, actor: Any, own_features: Sequence[str], task_feature
               str(stem.with_suffix(".safetensors")))
     stem.with_suffix(".json").write_text(text + "\n")
     return stem.with_suffix(".json")
+
+
+def write_safetensors(tensors: Mapping[str, Any], path: str) -> None:
+    """CPU tensors in the safetensors format without the safetensors package: an 8-byte little-endian header length,
+    the JSON header (dtype, shape, byte offsets of each tensor; padded with spaces to 8 bytes), then the raw
+    little-endian data (the format's specification, huggingface/safetensors README)."""
+    header, chunks, offset = {}, [], 0
+    for name in sorted(tensors):
+        array = tensors[name].numpy()
+        dtype = SAFETENSORS_DTYPES.get(str(array.dtype))
+        if dtype is None:
+            raise CheckpointError(f"tensor {name!r}: dtype {array.dtype} is not one of {sorted(SAFETENSORS_DTYPES)}")
+        data = array.astype(array.dtype.newbyteorder("<"), copy=False).tobytes(order="C")
+        header[name] = {"dtype": dtype, "shape": list(array.shape), "data_offsets": [offset, offset + len(data)]}
+        chunks.append(data)
+        offset += len(data)
+    text = json.dumps(header, separators=(",", ":")).encode()
+    text += b" " * (-len(text) % 8)
+    with open(path, "wb") as out:
+        out.write(struct.pack("<Q", len(text)) + text)
+        out.writelines(chunks)
 
 
 def load(source: str | Path | Traversable, allow_pickle: bool = False) -> Checkpoint:

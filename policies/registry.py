@@ -167,8 +167,9 @@ def _plain(request: LoadRequest, **options: Any) -> Policy:
     return LearnedPolicy.from_checkpoint(request.checkpoint, name=request.name, **options)
 
 
-# what the product trains: SB3 (no algo in converted checkpoints; maskable_ppo, ppo), RLlib and MAPPO bidders
-for _algo in (None, "maskable_ppo", "ppo", "rllib_ppo", "mappo"):
+# what the product trains: SB3 (no algo in converted checkpoints; maskable_ppo, ppo), RLlib, MAPPO and BenchMARL
+# MAPPO bidders
+for _algo in (None, "maskable_ppo", "ppo", "rllib_ppo", "mappo", "benchmarl_mappo"):
     register_checkpoint_loader(_algo, _plain)
 
 

@@ -28,6 +28,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("taskalloc.training.train", "train a shared bidding policy with SB3 (Maskable)PPO"),
     "mappo": ("taskalloc.training.mappo", "train with MAPPO: decentralised actors, a centralised critic"),
     "rllib": ("taskalloc.training.rllib_ppo", "train with RLlib PPO (the ray extra)"),
+    "benchmarl": ("taskalloc.training.benchmarl_mappo", "train with BenchMARL MAPPO (its own venv), export the actor"),
     "curves": ("taskalloc.training.curves", "learning curves from training runs' eval.csv"),
     "checkpoint": ("taskalloc.policies.checkpoint", "inspect or convert a learned policy's checkpoint"),
 }

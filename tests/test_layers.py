@@ -26,6 +26,9 @@ FOLDERS = {"taskalloc_env": "taskalloc_env", "taskalloc.policies": "policies", "
            "taskalloc.training": "training", "taskalloc.cli": "taskalloc", "benchmarks": "benchmarks",
            "research": "research"}
 PRODUCT = LAYERS[: LAYERS.index("benchmarks")]
+# docs/decisions.md, "Product and research": the three models of the product's trainers, and the BenchMARL MAPPO seeds
+PRODUCT_MODELS = ["benchmarl_mappo_small_s0", "benchmarl_mappo_small_s1", "benchmarl_mappo_small_s2", "mappo_small",
+                  "mappo_small_pooling_1m", "train_small"]
 
 
 def layer(name: str) -> str | None:
@@ -145,11 +148,11 @@ def test_importing_the_whole_product_loads_no_research_module():
     assert out.stdout.strip() == "[]"
 
 
-def test_the_product_keeps_at_most_three_committed_models():
+def test_the_product_keeps_only_its_listed_committed_models():
     """models/ holds the product's learned models (docs/decisions.md, "Product and research"); research's are in
     research/models."""
     committed = sorted(p.name for p in (ROOT / "models").iterdir() if (p / "model.json").is_file())
-    assert committed == ["mappo_small", "mappo_small_pooling_1m", "train_small"]
+    assert committed == PRODUCT_MODELS
 
 
 @pytest.mark.slow
@@ -163,4 +166,4 @@ def test_the_wheel_holds_one_namespace_and_no_research(tmp_path):
     assert "taskalloc/policies/__init__.py" in entries and "taskalloc/training/mappo.py" in entries
     assert not [e for e in entries if "research" in e.split("/") or e.startswith(("tests/", "benchmarks/"))]
     models = {e.split("/")[3] for e in entries if e.startswith("taskalloc_env/_data/models/") and e.count("/") > 3}
-    assert models == {"mappo_small", "mappo_small_pooling_1m", "train_small"}, models
+    assert models == set(PRODUCT_MODELS), models
