@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import ast
 import graphlib
+import json
 import subprocess
 import sys
 import zipfile
@@ -26,9 +27,13 @@ FOLDERS = {"taskalloc_env": "taskalloc_env", "taskalloc.policies": "policies", "
            "taskalloc.training": "training", "taskalloc.cli": "taskalloc", "benchmarks": "benchmarks",
            "research": "research"}
 PRODUCT = LAYERS[: LAYERS.index("benchmarks")]
-# docs/decisions.md, "Product and research": the three models of the product's trainers, and the BenchMARL MAPPO seeds
-PRODUCT_MODELS = ["benchmarl_mappo_small_s0", "benchmarl_mappo_small_s1", "benchmarl_mappo_small_s2", "mappo_small",
-                  "mappo_small_pooling_1m", "train_small"]
+# docs/decisions.md, "Product and research": the three models of the product's trainers, and the leaderboard's
+# learned runs (docs/benchmark.md: every ``learned:<name>`` run of results/benchmark/v0/*/summary.json)
+LEADERBOARD_MODELS = sorted({run.split(":", 1)[1]
+                             for path in (ROOT / "results" / "benchmark" / "v0").glob("*/summary.json")
+                             for run in json.loads(path.read_text(encoding="utf-8"))["runs"]
+                             if run.startswith("learned:")})
+PRODUCT_MODELS = sorted({"mappo_small", "mappo_small_pooling_1m", "train_small", *LEADERBOARD_MODELS})
 
 
 def layer(name: str) -> str | None:
