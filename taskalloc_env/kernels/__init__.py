@@ -9,6 +9,7 @@
 * ``table.set_member``: one write X_i[k][j] to the group table (``GroupTable.set_reference``);
 * ``table.joined_members``: the columns a member joined since a copy (``GroupTable.joined_reference``);
 * ``quits.quittable``: the quit conditions of thesis Alg 9 (``Protocol.quittable_reference``);
+* ``batch``: the step of K instances held as (K, …) arrays, on the kernels above (the batched env's arrays engine);
 * ``taskalloc.policies.greedy.greedy_actions`` (in the policies' layer, on this module's ``jit``): the scripted bundle
 rule
   (``CBGAPolicy.choose_reference``).
