@@ -44,9 +44,13 @@ if COMPILED:
     NOTICE.listen()
 
 
-def jit(function: Callable[..., Any]) -> Callable[..., Any]:
-    """``numba.njit`` with an on-disk cache in ``cache_dir()``, or the function itself without numba."""
+def jit(function: Callable[..., Any] | None = None, *, inline: bool = False) -> Any:
+    """``numba.njit`` with an on-disk cache in ``cache_dir()``, or the function itself without numba; ``@jit(inline=
+    True)`` compiles a small helper into each caller (numba's ``inline="always"``), for helpers called so often that
+    the call costs more than their body."""
+    if function is None:
+        return lambda f: jit(f, inline=inline)
     if not COMPILED:
         return function
     with caching_in(numba, cache_dir()):
-        return NOTICE.watch(numba.njit(cache=True, nogil=True)(function))
+        return NOTICE.watch(numba.njit(cache=True, nogil=True, inline="always" if inline else "never")(function))

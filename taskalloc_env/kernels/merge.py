@@ -62,7 +62,7 @@ def _replaceable(m: int, newcomer: int, required: np.ndarray, agent_eq: np.ndarr
     return False
 
 
-@jit
+@jit(inline=True)
 def _value_of(agent: int, count: int, ids: np.ndarray, values: np.ndarray) -> float:
     """The bid of ``agent`` in a member list (0 if it is not a member)."""
     for c in range(count):
@@ -85,7 +85,7 @@ def _list_slot_open(count: int, ids: np.ndarray, newcomer: int, required: np.nda
     return False
 
 
-@jit
+@jit(inline=True)
 def _any_trusted(count: int, ids: np.ndarray, i: int, k: int, s_i: np.ndarray, s_k: np.ndarray) -> bool:
     """Some member other than the receiver i is the sender k or was heard of more recently by k than by i."""
     for c in range(count):
@@ -95,7 +95,7 @@ def _any_trusted(count: int, ids: np.ndarray, i: int, k: int, s_i: np.ndarray, s
     return False
 
 
-@jit
+@jit(inline=True)
 def _merge_members(count: int, ids: np.ndarray, values: np.ndarray, sent_count: int, sent_ids: np.ndarray,
                    sent_values: np.ndarray, i: int, k: int, s_i: np.ndarray, s_k: np.ndarray, need: int,
                    restricted: bool, required: np.ndarray, agent_eq: np.ndarray, taken: np.ndarray) -> int:
@@ -136,7 +136,7 @@ def _merge_members(count: int, ids: np.ndarray, values: np.ndarray, sent_count: 
             count = _insert(count - 1, ids, values, newcomer, bid)
 
 
-@jit
+@jit(inline=True)
 def _insert(count: int, ids: np.ndarray, values: np.ndarray, agent: int, value: float) -> int:
     """Insert (agent, value) into a member list kept in increasing id order; returns the new count."""
     c = count
@@ -147,7 +147,7 @@ def _insert(count: int, ids: np.ndarray, values: np.ndarray, agent: int, value: 
     return count + 1
 
 
-@jit
+@jit(inline=True)
 def _same_members(count_a: int, ids_a: np.ndarray, values_a: np.ndarray, count_b: int, ids_b: np.ndarray,
                   values_b: np.ndarray) -> bool:
     if count_a != count_b:
@@ -158,7 +158,7 @@ def _same_members(count_a: int, ids_a: np.ndarray, values_a: np.ndarray, count_b
     return True
 
 
-@jit
+@jit(inline=True)
 def _listed(agent: int, count: int, ids: np.ndarray) -> bool:
     """``agent`` is in a member list."""
     for c in range(count):  # noqa: SIM110 - compiled: an explicit loop, not a generator
@@ -192,7 +192,7 @@ def _only_sender(i: int, k: int, s_i: np.ndarray, s_k: np.ndarray) -> bool:
     return True
 
 
-@jit
+@jit(inline=True)
 def _kept_by_sender(count: int, ids: np.ndarray, values: np.ndarray, sent_count: int, sent_ids: np.ndarray,
                     sent_values: np.ndarray, k: int) -> bool:
     """A merge that trusts only the sender k leaves this column as it is: every member's bid is positive (pass A
