@@ -110,7 +110,12 @@ class TaskAllocVectorEnv:
                                   f"episode (a failed agent would leave env.agents, a late joiner enter it); only "
                                   f"{allowed!r} is supported")
         k = int(num_envs)
-        self._check_memory(k, template, memory_limit_gb)
+        outside = unsupported(cfg)
+        if engine == "arrays" and outside is not None:
+            raise ConfigError(f"engine='arrays' does not cover {outside}; use engine='auto' or 'instances'")
+        # which path steps the instances: the compiled arrays where the options allow, else each env in turn
+        self.engine = "instances" if engine == "instances" or outside is not None else "arrays"
+        self._check_memory(k, template, memory_limit_gb, self.engine == "arrays")
         self.num_envs = k
         self.autoreset_mode = autoreset_mode
         self.render_mode = None                         # the batch does not render (Gymnasium's attribute)
@@ -133,11 +138,6 @@ class TaskAllocVectorEnv:
                                       dtype=template.state_space.dtype)
         self.invalid_action = template.invalid_action
         self.envs = [template] + [_clone(template) for _ in range(k - 1)]
-        outside = unsupported(cfg)
-        if engine == "arrays" and outside is not None:
-            raise ConfigError(f"engine='arrays' does not cover {outside}; use engine='auto' or 'instances'")
-        # which path steps the instances: the compiled arrays where the options allow, else each env in turn
-        self.engine = "instances" if engine == "instances" or outside is not None else "arrays"
         self._obs = np.zeros((k, n, d), dtype=box.dtype)
         self._masks = np.zeros((k, n, a), dtype=np.int8)
         self._batch = ArrayBatch(k, template, self._obs) if self.engine == "arrays" else None
@@ -145,14 +145,22 @@ class TaskAllocVectorEnv:
         self._started = False
 
     @staticmethod
-    def _check_memory(k: int, template: TaskAllocEnv, limit_gb: float | None) -> None:
-        """Refuse K instances whose estimate exceeds ``limit_gb`` (default: the memory available now), before any
-        instance beyond the template exists."""
+    def _per_instance_bytes(template: TaskAllocEnv, arrays: bool) -> int:
+        """The estimated bytes of one instance: its env (``memory.memory_estimate``), its observations and masks, and
+        with ``arrays`` its state in the arrays engine (``ArrayBatch.bytes_per_instance``)."""
         cfg = template.config
         d = template.observation_space(template.possible_agents[0])["observation"].shape[0]
         a = int(template.action_space(template.possible_agents[0]).n)
         per_instance = memory_estimate(cfg.n_agents, cfg.n_tasks, cfg.max_bundle, template._max_agents_per_task,
                                        cfg.asynchronous) + cfg.n_agents * (8 * d + 2 * a)
+        return per_instance + (ArrayBatch.bytes_per_instance(template) if arrays else 0)
+
+    @classmethod
+    def _check_memory(cls, k: int, template: TaskAllocEnv, limit_gb: float | None, arrays: bool) -> None:
+        """Refuse K instances whose estimate exceeds ``limit_gb`` (default: the memory available now), before any
+        instance beyond the template exists."""
+        cfg = template.config
+        per_instance = cls._per_instance_bytes(template, arrays)
         need = k * per_instance
         limit = available_memory() if limit_gb is None else limit_gb * 2**30
         if need > limit:

@@ -134,6 +134,16 @@ class ArrayBatch:
         self.rngs: list[np.random.Generator | None] = [None] * k
         self.keep = np.ones((k, n * n), dtype=bool)
 
+    @staticmethod
+    def bytes_per_instance(template: Any) -> int:
+        """The bytes one instance's arrays take (counted on a batch of one shaped like ``template``), without the
+        observations, which the caller allocates."""
+        n = template.config.n_agents
+        d = template.observation_space(template.possible_agents[0])["observation"].shape[0]
+        one = ArrayBatch(1, template, np.zeros((1, n, d)))
+        return sum(value.nbytes for value in vars(one).values()
+                   if isinstance(value, np.ndarray) and not np.shares_memory(value, one.obs))
+
     # -- instances in and out --------------------------------------------------------------------------------------
     def load(self, k: int, env: Any) -> None:
         """Instance k starts from ``env`` just reset: its scenario, derived arrays and empty tables."""

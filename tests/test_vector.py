@@ -27,7 +27,8 @@ import taskalloc_env
 from taskalloc.policies import make_policy
 from taskalloc_env import TaskAllocEnv, kernels
 from taskalloc_env.errors import ConfigError, InvalidActionError
-from taskalloc_env.vector import INFO_KEYS
+from taskalloc_env.vector import INFO_KEYS, TaskAllocVectorEnv
+from taskalloc_env.vector_arrays import ArrayBatch
 
 K = 3
 
@@ -373,6 +374,28 @@ def test_bad_num_envs(num_envs):
 def test_too_large_for_memory_is_refused_with_the_estimate():
     with pytest.raises(ConfigError, match=r"num_envs=100,000 .* GiB.*limit is 1.0 GiB \(memory_limit_gb\)"):
         taskalloc_env.vector_env(100_000, scenario="default", memory_limit_gb=1.0)
+
+
+@pytest.mark.skipif(not kernels.COMPILED, reason="the arrays engine needs the compiled kernels")
+def test_memory_estimate_counts_the_arrays_engine(monkeypatch):
+    template = TaskAllocEnv("train_small")
+    engine_bytes = ArrayBatch.bytes_per_instance(template)
+    with_arrays = TaskAllocVectorEnv._per_instance_bytes(template, arrays=True)
+    assert engine_bytes > 0 and with_arrays == TaskAllocVectorEnv._per_instance_bytes(template, False) + engine_bytes
+    # a limit between 4 instances without the engine's arrays and 4 with them: only engine="arrays" is refused
+    limit_gb = 4 * (with_arrays - engine_bytes / 2) / 2**30
+    built, init = [], ArrayBatch.__init__
+
+    def recorded(self: ArrayBatch, k: int, *args: object) -> None:
+        built.append(k)
+        init(self, k, *args)
+
+    monkeypatch.setattr(ArrayBatch, "__init__", recorded)
+    assert taskalloc_env.vector_env(4, scenario="train_small", engine="instances", memory_limit_gb=limit_gb)
+    assert taskalloc_env.vector_env(3, scenario="train_small", engine="arrays", memory_limit_gb=limit_gb)
+    with pytest.raises(ConfigError, match="num_envs=4 "):
+        taskalloc_env.vector_env(4, scenario="train_small", engine="arrays", memory_limit_gb=limit_gb)
+    assert 4 not in built                       # the refused batch allocated nothing
 
 
 @pytest.mark.parametrize("option", [{"dropouts": 1}, {"dropout_schedule": [[0, 2]]}, {"join_at": {1: 2}},

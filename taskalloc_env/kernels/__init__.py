@@ -9,6 +9,7 @@
 * ``table.set_member``: one write X_i[k][j] to the group table (``GroupTable.set_reference``);
 * ``table.joined_members``: the columns a member joined since a copy (``GroupTable.joined_reference``);
 * ``quits.quittable``: the quit conditions of thesis Alg 9 (``Protocol.quittable_reference``);
+* ``batch``: the step of K instances held as (K, …) arrays, on the kernels above (the batched env's arrays engine);
 * ``taskalloc.policies.greedy.greedy_actions`` (in the policies' layer, on this module's ``jit``): the scripted bundle
 rule
   (``CBGAPolicy.choose_reference``).
@@ -43,9 +44,13 @@ if COMPILED:
     NOTICE.listen()
 
 
-def jit(function: Callable[..., Any]) -> Callable[..., Any]:
-    """``numba.njit`` with an on-disk cache in ``cache_dir()``, or the function itself without numba."""
+def jit(function: Callable[..., Any] | None = None, *, inline: bool = False) -> Any:
+    """``numba.njit`` with an on-disk cache in ``cache_dir()``, or the function itself without numba; ``@jit(inline=
+    True)`` compiles a small helper into each caller (numba's ``inline="always"``), for helpers called so often that
+    the call costs more than their body."""
+    if function is None:
+        return lambda f: jit(f, inline=inline)
     if not COMPILED:
         return function
     with caching_in(numba, cache_dir()):
-        return NOTICE.watch(numba.njit(cache=True, nogil=True)(function))
+        return NOTICE.watch(numba.njit(cache=True, nogil=True, inline="always" if inline else "never")(function))

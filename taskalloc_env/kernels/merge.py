@@ -62,7 +62,7 @@ def _replaceable(m: int, newcomer: int, required: np.ndarray, agent_eq: np.ndarr
     return False
 
 
-@jit
+@jit(inline=True)
 def _value_of(agent: int, count: int, ids: np.ndarray, values: np.ndarray) -> float:
     """The bid of ``agent`` in a member list (0 if it is not a member)."""
     for c in range(count):
@@ -85,7 +85,7 @@ def _list_slot_open(count: int, ids: np.ndarray, newcomer: int, required: np.nda
     return False
 
 
-@jit
+@jit(inline=True)
 def _any_trusted(count: int, ids: np.ndarray, i: int, k: int, s_i: np.ndarray, s_k: np.ndarray) -> bool:
     """Some member other than the receiver i is the sender k or was heard of more recently by k than by i."""
     for c in range(count):
@@ -95,7 +95,7 @@ def _any_trusted(count: int, ids: np.ndarray, i: int, k: int, s_i: np.ndarray, s
     return False
 
 
-@jit
+@jit(inline=True)
 def _merge_members(count: int, ids: np.ndarray, values: np.ndarray, sent_count: int, sent_ids: np.ndarray,
                    sent_values: np.ndarray, i: int, k: int, s_i: np.ndarray, s_k: np.ndarray, need: int,
                    restricted: bool, required: np.ndarray, agent_eq: np.ndarray, taken: np.ndarray) -> int:
@@ -136,7 +136,7 @@ def _merge_members(count: int, ids: np.ndarray, values: np.ndarray, sent_count: 
             count = _insert(count - 1, ids, values, newcomer, bid)
 
 
-@jit
+@jit(inline=True)
 def _insert(count: int, ids: np.ndarray, values: np.ndarray, agent: int, value: float) -> int:
     """Insert (agent, value) into a member list kept in increasing id order; returns the new count."""
     c = count
@@ -147,7 +147,7 @@ def _insert(count: int, ids: np.ndarray, values: np.ndarray, agent: int, value: 
     return count + 1
 
 
-@jit
+@jit(inline=True)
 def _same_members(count_a: int, ids_a: np.ndarray, values_a: np.ndarray, count_b: int, ids_b: np.ndarray,
                   values_b: np.ndarray) -> bool:
     if count_a != count_b:
@@ -158,7 +158,7 @@ def _same_members(count_a: int, ids_a: np.ndarray, values_a: np.ndarray, count_b
     return True
 
 
-@jit
+@jit(inline=True)
 def _listed(agent: int, count: int, ids: np.ndarray) -> bool:
     """``agent`` is in a member list."""
     for c in range(count):  # noqa: SIM110 - compiled: an explicit loop, not a generator
@@ -184,21 +184,43 @@ def _own_tasks(sent_count: np.ndarray, sent_ids: np.ndarray, single: np.ndarray,
 
 
 @jit
+def _only_sender(i: int, k: int, s_i: np.ndarray, s_k: np.ndarray) -> bool:
+    """k is the only agent other than i that i must trust from k: k heard of no other agent more recently than i."""
+    for a in range(s_i.size):  # noqa: SIM110 - compiled: an explicit loop, not a generator
+        if a != i and a != k and s_k[a] > s_i[a]:
+            return False
+    return True
+
+
+@jit(inline=True)
+def _kept_by_sender(count: int, ids: np.ndarray, values: np.ndarray, sent_count: int, sent_ids: np.ndarray,
+                    sent_values: np.ndarray, k: int) -> bool:
+    """A merge that trusts only the sender k leaves this column as it is: every member's bid is positive (pass A
+    keeps the untrusted ones) and k is a member on both sides with the same bid (pass A keeps it, pass B has no
+    newcomer) or on neither (nothing to refresh, no newcomer)."""
+    mine, listed = 0.0, False
+    for c in range(count):
+        if not values[c] > 0:
+            return False
+        if ids[c] == k:
+            mine, listed = values[c], True
+    for c in range(sent_count):
+        if sent_ids[c] == k:
+            return listed and sent_values[c] == mine
+    return not listed
+
+
+@jit
 def _columns_to_visit(count_i: np.ndarray, ids_i: np.ndarray, single: np.ndarray, sender_tasks: np.ndarray,
-                      sender_count: int, i: int, k: int, s_i: np.ndarray, s_k: np.ndarray, visit: np.ndarray) -> int:
+                      sender_count: int, only_sender: bool, k: int, visit: np.ndarray) -> int:
     """The columns a message from k to i can change, into ``visit``; returns how many.
 
     A multi-agent column changes only through a member that i must trust from k (``_any_trusted``): k itself, or an
-    agent k heard of more recently than i. When k is the only such agent (on a connected network after the first
-    rounds, nearly always), only the columns where k is a member in i's table or in k's can change; every column
-    otherwise. Single-agent columns are always visited (the CBBA table decides them). Order does not matter: a
-    message's columns are merged independently."""
+    agent k heard of more recently than i. When k is the only such agent (``only_sender``: on a connected network
+    after the first rounds, nearly always), only the columns where k is a member in i's table or in k's can change;
+    every column otherwise. Single-agent columns are always visited (the CBBA table decides them). Order does not
+    matter: a message's columns are merged independently."""
     m = count_i.size
-    only_sender = True
-    for a in range(s_i.size):
-        if a != i and a != k and s_k[a] > s_i[a]:
-            only_sender = False
-            break
     visits = 0
     for j in range(m):
         if not only_sender or single[j] or _listed(k, count_i[j], ids_i[j]):
@@ -245,7 +267,8 @@ def exchange_all(count: np.ndarray, ids: np.ndarray, values: np.ndarray, own: np
         s_i[:] = stamps[i]
         s_k = snap_stamps[q, k]
         changed = False
-        visits = _columns_to_visit(count[i], ids[i], single, own_tasks[t], own_count[t], i, k, s_i, s_k, visit)
+        only_sender = _only_sender(i, k, s_i, s_k)
+        visits = _columns_to_visit(count[i], ids[i], single, own_tasks[t], own_count[t], only_sender, k, visit)
         for x in range(visits):
             j = visit[x]
             if single[j]:
@@ -271,6 +294,8 @@ def exchange_all(count: np.ndarray, ids: np.ndarray, values: np.ndarray, own: np
             c_i, c_k = count[i, j], sent_count[t, j]
             if _same_members(c_i, ids[i, j], values[i, j], c_k, sent_ids[t, j], sent_values[t, j]):
                 continue                    # an identical column: neither pass changes anything
+            if only_sender and _kept_by_sender(c_i, ids[i, j], values[i, j], c_k, sent_ids[t, j], sent_values[t, j], k):
+                continue                    # k's bid is the same on both sides and nobody else is trusted
             if not (_any_trusted(c_i, ids[i, j], i, k, s_i, s_k) or _any_trusted(c_k, sent_ids[t, j], i, k, s_i, s_k)):
                 continue                    # both passes act on trusted members only: nothing can change
             for c in range(c_i):
