@@ -89,3 +89,15 @@ def test_a_fresh_process_after_the_cache_exists_compiles_nothing(tmp_path):
     assert any((tmp_path / "taskalloc" / "numba").rglob("*.nbi"))                     # written to the cache
     compiles, err = run()
     assert compiles == 0 and "compiling" not in err
+
+
+def test_kernel_cache_folder_follows_every_kernel_source(tmp_path, monkeypatch):
+    """A kernel embeds the kernels it calls, so the cache folder changes when any kernel file does."""
+    from taskalloc_env.kernels.cache import kernel_cache_dir, sources_digest
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "mine"))
+    assert kernel_cache_dir() == tmp_path / "mine" / f"src-{sources_digest()}"
+    (tmp_path / "a.py").write_text("x = 1\n")
+    (tmp_path / "b.py").write_text("y = 1\n")
+    before = sources_digest(tmp_path)
+    (tmp_path / "b.py").write_text("y = 2\n")
+    assert sources_digest(tmp_path) != before

@@ -18,7 +18,8 @@ Without numba, or with the environment variable ``TASKALLOC_KERNELS=reference``,
 numpy references run instead (the same allocations; observations may differ in the last bit of an ``exp``, see
 docs/decisions.md). ``tests/test_kernels.py`` compares each kernel with its reference on random inputs. The machine
 code is cached in a user folder shared by every process (``kernels.cache``: ``~/.cache/taskalloc/numba`` unless
-``NUMBA_CACHE_DIR`` is set); a process that compiles says so in one line on stderr.
+``NUMBA_CACHE_DIR`` is set, one sub-folder per version of the kernels' sources); a process that compiles says so in
+one line on stderr.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ import os
 from collections.abc import Callable
 from typing import Any
 
-from taskalloc_env.kernels.cache import CompileNotice, cache_dir, caching_in
+from taskalloc_env.kernels.cache import CompileNotice, caching_in, kernel_cache_dir
 
 try:
     import numba
@@ -40,17 +41,18 @@ if MODE not in MODES:
     raise ImportError(f"TASKALLOC_KERNELS={MODE!r} is not one of {MODES}")
 COMPILED = numba is not None and MODE == "compiled"
 NOTICE = CompileNotice()        # this process's compiles of the kernels below (cache misses)
+CACHE = kernel_cache_dir() if COMPILED else None      # one folder per version of the kernels' sources
 if COMPILED:
     NOTICE.listen()
 
 
 def jit(function: Callable[..., Any] | None = None, *, inline: bool = False) -> Any:
-    """``numba.njit`` with an on-disk cache in ``cache_dir()``, or the function itself without numba; ``@jit(inline=
+    """``numba.njit`` with an on-disk cache in ``CACHE``, or the function itself without numba; ``@jit(inline=
     True)`` compiles a small helper into each caller (numba's ``inline="always"``), for helpers called so often that
     the call costs more than their body."""
     if function is None:
         return lambda f: jit(f, inline=inline)
     if not COMPILED:
         return function
-    with caching_in(numba, cache_dir()):
+    with caching_in(numba, CACHE):
         return NOTICE.watch(numba.njit(cache=True, nogil=True, inline="always" if inline else "never")(function))

@@ -14,9 +14,9 @@ rules as the single env through the kernels it already uses (``merge.exchange_al
 * ``observe_all``: the bid view, the observations and the action masks (``TaskAllocEnv._rows``).
 
 Sums follow numpy's pairwise order (``pairwise_sum``), so every float is bit-identical to the single env's
-(``tests/test_vector.py``). The references are the Python classes named above. numba's on-disk cache keys a kernel on
-its own file, while these phases embed the kernels they call: a change to one of those reaches the phases once this
-file changes too, or with an empty cache (``NUMBA_CACHE_DIR``).
+(``tests/test_vector.py``). The references are the Python classes named above. These phases embed the kernels they
+call; the cache folder is keyed on every kernel file (``kernels.cache.sources_digest``), so a change to any of them
+recompiles the phases.
 """
 
 from __future__ import annotations

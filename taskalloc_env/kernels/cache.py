@@ -3,15 +3,18 @@
 numba writes a kernel's machine code next to its source (``__pycache__``) unless told otherwise: inside
 site-packages for an installed package, a folder that may not be writable and that every reinstall empties. Ours:
 the kernels go to ``NUMBA_CACHE_DIR`` when the user sets it, else to the user's cache folder
-(``$XDG_CACHE_HOME/taskalloc/numba``, by default ``~/.cache/taskalloc/numba``), one sub-folder per source tree
-(numba's own naming), so that every later process (an evaluation worker, the next run) loads them instead of
-compiling. The first compile of a process prints one line on stderr; a process that finds every kernel in the
+(``$XDG_CACHE_HOME/taskalloc/numba``, by default ``~/.cache/taskalloc/numba``), so that every later process (an
+evaluation worker, the next run) loads them instead of compiling. Inside it, one sub-folder per version of the
+kernels' sources (``sources_digest``): numba checks only the file that defines a kernel, but a kernel carries the
+machine code of the kernels it calls (the batched step holds the merge), so a change to any kernel file must start
+a fresh cache. The first compile of a process prints one line on stderr; a process that finds every kernel in the
 cache prints nothing.
 """
 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import sys
 from collections.abc import Iterator
@@ -26,6 +29,19 @@ def cache_dir() -> Path:
         return Path(chosen)
     base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
     return Path(base) / "taskalloc" / "numba"
+
+
+def sources_digest(folder: Path = Path(__file__).parent) -> str:
+    """12 hex digits of the SHA-256 of every kernel source file (``*.py`` of ``folder``, in name order)."""
+    digest = hashlib.sha256()
+    for path in sorted(folder.glob("*.py")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:12]
+
+
+def kernel_cache_dir() -> Path:
+    """The folder this version of the kernels is cached in: ``cache_dir() / "src-<sources_digest()>"``."""
+    return cache_dir() / f"src-{sources_digest()}"
 
 
 @contextlib.contextmanager
