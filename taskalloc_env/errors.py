@@ -6,6 +6,9 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Callable
+from typing import Any
+
+import yaml
 
 
 class ConfigError(ValueError):
@@ -34,4 +37,15 @@ def seed_argument(text: str) -> int:
         raise argparse.ArgumentTypeError(f"a seed is a non-negative integer, got {text!r}") from None
     if value < 0:
         raise argparse.ArgumentTypeError(f"a seed is a non-negative integer, got {value}")
+    return value
+
+
+def mapping_argument(text: str) -> dict[str, Any]:
+    """An argparse ``type`` for a YAML mapping on the command line (``'{task_quitting: true, delta: 1}'``)."""
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise argparse.ArgumentTypeError(f"not a plain YAML mapping ({str(exc).splitlines()[0]})") from None
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError(f"expected a YAML mapping such as '{{task_quitting: true}}', got {text!r}")
     return value

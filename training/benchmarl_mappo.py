@@ -45,7 +45,7 @@ from taskalloc.training.config import plain, prepare_out_dir
 from taskalloc_env import suite
 from taskalloc_env.config import to_mapping
 from taskalloc_env.env import TaskAllocEnv
-from taskalloc_env.errors import ConfigError, run_cli, seed_argument
+from taskalloc_env.errors import ConfigError, mapping_argument, run_cli, seed_argument
 
 HIDDEN = 256                    # the actor's width: MlpConfig(num_cells=[256, 256]) = MlpActor(hidden=256)
 MAX_LOGIT_DIFF = 1e-5           # exported vs BenchMARL masked logits, largest absolute difference allowed (ours)
@@ -219,16 +219,6 @@ def summarise_scores(policy: Any, scenario: Mapping[str, Any], seeds: Sequence[i
     return float(summarise(evaluate(policy, scenario, seeds))["score"])
 
 
-def _mapping(text: str) -> dict[str, Any]:
-    try:
-        value = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise argparse.ArgumentTypeError(f"not a plain YAML mapping ({str(exc).splitlines()[0]})") from None
-    if not isinstance(value, dict):
-        raise argparse.ArgumentTypeError(f"expected a YAML mapping such as '{{task_quitting: true}}', got {text!r}")
-    return value
-
-
 def _task_id(text: str) -> str:
     """``Small`` or ``taskalloc/Small-v0`` → the suite id."""
     return text if "/" in text else f"taskalloc/{text}-{suite.SUITE}"
@@ -248,7 +238,7 @@ def main(argv: Sequence[str] | None = None) -> Any:
     run.add_argument("--agent-steps", type=int, default=1_000_000,
                      help="budget in agent steps = frames x agents (default 1000000)")
     run.add_argument("--seed", type=seed_argument, default=0, help="BenchMARL's seed (default 0)")
-    run.add_argument("--env-overrides", type=_mapping, default=dict(DEFAULT_ENV_OVERRIDES), metavar="YAML",
+    run.add_argument("--env-overrides", type=mapping_argument, default=dict(DEFAULT_ENV_OVERRIDES), metavar="YAML",
                      help="protocol options the policy plays with (default '{task_quitting: true, delta: 1}')")
     run.add_argument("--eval-episodes", type=int, default=50,
                      help="validation seeds of the task the exported model is scored on (default 50)")

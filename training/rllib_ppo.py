@@ -44,7 +44,7 @@ from taskalloc.training.config import plain, prepare_out_dir
 from taskalloc.training.rllib_module import NETWORKS, TaskAllocRLModule
 from taskalloc_env.config import PROTOCOL_FIELDS, resolve_config
 from taskalloc_env.env import TaskAllocEnv
-from taskalloc_env.errors import ConfigError, run_cli, seed_argument
+from taskalloc_env.errors import ConfigError, mapping_argument, run_cli, seed_argument
 from taskalloc_env.taskalloc_v0 import parallel_env
 from taskalloc_env.wrappers.rllib import RLlibObservations
 
@@ -168,16 +168,6 @@ def export_checkpoint(args: argparse.Namespace) -> Path:
     return written
 
 
-def _mapping(text: str) -> dict[str, Any]:
-    try:
-        value = yaml.safe_load(text)
-    except yaml.YAMLError as exc:                   # a tag such as !!python/object, or a parse error
-        raise argparse.ArgumentTypeError(f"not a plain YAML mapping ({str(exc).splitlines()[0]})") from None
-    if not isinstance(value, dict):
-        raise argparse.ArgumentTypeError(f"expected a YAML mapping such as '{{task_quitting: true}}', got {text!r}")
-    return value
-
-
 def main(argv: Sequence[str] | None = None) -> Any:
     parser = argparse.ArgumentParser(prog="taskalloc rllib", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -188,7 +178,7 @@ def main(argv: Sequence[str] | None = None) -> Any:
                      help="replace a model already in --out-dir (default: no)")
     run.add_argument("--name", default="rllib_ppo", help="run name stored in the checkpoint (default rllib_ppo)")
     run.add_argument("--scenario", default="train_small", help="scenario name or YAML path (default train_small)")
-    run.add_argument("--set", type=_mapping, default={}, metavar="YAML",
+    run.add_argument("--set", type=mapping_argument, default={}, metavar="YAML",
                      help="scenario overrides, e.g. '{n_agents: 6, n_tasks: 12}' (default none)")
     run.add_argument("--network", choices=sorted(NETWORKS), default="attention", help="actor network")
     run.add_argument("--hidden", type=int, default=64, help="width of actor and critic (default 64)")
@@ -206,7 +196,8 @@ def main(argv: Sequence[str] | None = None) -> Any:
     run.add_argument("--eval-episodes", type=int, default=50,
                      help="validation instances the exported model is scored on (default 50)")
     for p in (run, sub.add_parser("export", help="an RLlib checkpoint of this module → a project checkpoint")):
-        p.add_argument("--env-overrides", type=_mapping, default={"task_quitting": True, "delta": 1}, metavar="YAML",
+        p.add_argument("--env-overrides", type=mapping_argument, default={"task_quitting": True, "delta": 1},
+                       metavar="YAML",
                        help="protocol options the policy plays with (default '{task_quitting: true, delta: 1}')")
     exp = sub.choices["export"]
     exp.add_argument("rllib_checkpoint", help="the algorithm checkpoint folder (<out-dir>/rllib) or a module's")

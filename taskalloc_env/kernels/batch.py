@@ -153,6 +153,17 @@ def apply_actions(which: np.ndarray, actions: np.ndarray, every_step: bool, by_b
         istate[k, ENDS_ROUND] = every_step or everyone
 
 
+@jit(inline=True)
+def _drop_gone(seq: np.ndarray, length: int, gone: np.ndarray) -> int:
+    """Remove the tasks marked ``gone`` from ``seq[:length]`` in place, keeping the order; the new length."""
+    kept = 0
+    for r in range(length):
+        if not gone[seq[r]]:
+            seq[kept] = seq[r]
+            kept += 1
+    return kept
+
+
 @jit
 def _release(i: int, lost: int, by_bundle: bool, bundles: np.ndarray, bundle_len: np.ndarray, paths: np.ndarray,
              path_len: np.ndarray, ids: np.ndarray, values: np.ndarray, count: np.ndarray, own: np.ndarray,
@@ -168,18 +179,8 @@ def _release(i: int, lost: int, by_bundle: bool, bundles: np.ndarray, bundle_len
     dropped = seq[cut:length].copy()
     for j in dropped:
         gone[j] = True
-    kept = 0
-    for r in range(bundle_len[i]):
-        if not gone[bundles[i, r]]:
-            bundles[i, kept] = bundles[i, r]
-            kept += 1
-    bundle_len[i] = kept
-    kept = 0
-    for r in range(path_len[i]):
-        if not gone[paths[i, r]]:
-            paths[i, kept] = paths[i, r]
-            kept += 1
-    path_len[i] = kept
+    bundle_len[i] = _drop_gone(bundles[i], bundle_len[i], gone)
+    path_len[i] = _drop_gone(paths[i], path_len[i], gone)
     for j in dropped:
         set_member(ids, values, count, own, capacity, i, i, j, 0.0)
 
