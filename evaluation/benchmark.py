@@ -32,6 +32,7 @@ from taskalloc.evaluation.episodes import default_jobs, solver_name
 from taskalloc.evaluation.suite_episodes import ROW_FIELDS, play_task
 from taskalloc.evaluation.suite_reference import load_reference, means, write_reference
 from taskalloc.evaluation.training_cost import training_cost
+from taskalloc.evaluation.versus import versus_table
 from taskalloc_env.errors import ConfigError, InvalidActionError
 from taskalloc_env.suite import SUITE, TASKS, cards, task
 
@@ -249,6 +250,9 @@ def parser() -> argparse.ArgumentParser:
                    help="print the committed reference's mean scores per task (markdown) and exit")
     p.add_argument("--leaderboard", nargs="+", type=Path, metavar="DIR",
                    help="print one markdown table of the normalised scores in these --out folders and exit")
+    p.add_argument("--versus", nargs="+", type=Path, metavar=("BASELINE", "DIR"),
+                   help="print each run of these --out folders against the first folder's run, task by task "
+                        "(share of its score, paired p, wins on the same seeds) and exit")
     p.add_argument("--write-reference", action="store_true",
                    help="recompute configs/suites/v0/reference.json for --tasks (random, normaliser, best known)")
     return p
@@ -270,6 +274,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     if args.leaderboard:
         print(leaderboard(args.leaderboard), end="")
+        return 0
+    if args.versus:
+        if len(args.versus) < 2:
+            raise ConfigError("--versus BASELINE DIR [DIR ...]: a baseline folder and at least one folder to compare")
+        print(versus_table(args.versus[0], args.versus[1:]), end="")
         return 0
     if args.episodes is not None and args.episodes < 1:
         raise ConfigError(f"--episodes: got {args.episodes}; allowed: an integer >= 1")

@@ -31,7 +31,6 @@ on the same seeds) show the mean over seeds and the 95 % interval across seeds.
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import hashlib
 import json
@@ -42,14 +41,11 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 import yaml
 from scipy import stats
 
+from taskalloc.evaluation.curves import plot_bands, read_eval
 from taskalloc.evaluation.distributed import BACKENDS
 from taskalloc.evaluation.episodes import CENTRALISED, Episode, default_jobs, run_episodes, skip_reason
 from taskalloc.evaluation.report import markdown_table
@@ -343,50 +339,13 @@ def _protocol_mean(runs: Sequence[Mapping[str, Any]]) -> list[str]:
             f"{np.mean([np.mean(r['messages']) for r in runs]):.1f}"]
 
 
-def read_eval(path: Path) -> dict[str, list[tuple[int, float]]]:
-    """eval.csv → per entry, (steps, score / baseline score) pairs (MAPPO's ``entry`` column; SB3's one scenario)."""
-    with open(path, newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    curves: dict[str, list[tuple[int, float]]] = {}
-    for r in rows:
-        steps = int(float(r.get("steps") or r["timesteps"]))
-        curves.setdefault(r.get("entry", "train_small"), []).append((steps, float(r["ratio"])))
-    return curves
-
-
 def plot_curves(out: Path, runs_dir: Path, configs: Sequence[Config]) -> None:
     """Validation score / CBGABI's against agent steps: mean over seeds and the 95 % interval across seeds."""
-    every = {config.name: [read_eval(p) for p in sorted((runs_dir / config.name).glob("seed*/eval.csv"))]
+    every = {config.label: [read_eval(p) for p in sorted((runs_dir / config.name).glob("seed*/eval.csv"))]
              for config in configs}
     entries = [e for e in ("train_small", "6x12", "default", "train_small_loss20")
                if any(e in c for curves in every.values() for c in curves)] or ["train_small"]
-    fig, axes = plt.subplots(1, len(entries), figsize=(1 + 4.6 * len(entries), 4.2), sharey=False, squeeze=False)
-    axes = axes[0]
-    for config in configs:
-        curves = every[config.name]
-        for ax, entry in zip(axes, entries):
-            per_seed = [c[entry] for c in curves if entry in c]
-            if len(per_seed) < 1:
-                continue
-            n = min(len(c) for c in per_seed)
-            steps = np.array([p[0] for p in per_seed[0][:n]])
-            ratio = np.array([[p[1] for p in c[:n]] for c in per_seed])
-            mean = ratio.mean(axis=0)
-            line = ax.plot(steps, mean, marker="o", markersize=2.5, label=f"{config.label} ({len(per_seed)} seeds)")
-            if len(per_seed) > 1:
-                half = stats.t.ppf(0.975, len(per_seed) - 1) * ratio.std(axis=0, ddof=1) / np.sqrt(len(per_seed))
-                ax.fill_between(steps, mean - half, mean + half, color=line[0].get_color(), alpha=0.2)
-    for ax, entry in zip(axes, entries):
-        ax.axhline(1.0, color="black", linestyle="--", linewidth=1)
-        ax.set_title(f"validation: {entry}")
-        ax.set_xlabel("agent steps")
-        ax.grid(alpha=0.3)
-    axes[0].set_ylabel("mean score / CBGABI's (same 50 seeds)")
-    axes[0].legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    plot_bands(out, every, entries)
 
 
 def training_table(runs_dir: Path, configs: Sequence[Config]) -> str:

@@ -26,7 +26,7 @@ architecture is plain JSON (``taskalloc.policies.checkpoint``). Training wraps t
 from __future__ import annotations
 
 import itertools
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import ClassVar
 
 import numpy as np
@@ -78,6 +78,34 @@ def with_release_head(actor: nn.Module, state: Mapping[str, th.Tensor],
                              f"{tuple(own[key].shape)} (hidden, heads and layers must match)")
         widened[key] = value.clone()
     return widened
+
+
+def with_new_features(actor: nn.Module, state: Mapping[str, th.Tensor], source: tuple[Sequence[str], Sequence[str]],
+                      names: tuple[Sequence[str], Sequence[str]]) -> dict[str, th.Tensor]:
+    """The weights ``state`` of a pooling actor over the observation features ``source`` (own, per task), for
+    ``actor``, the same network over ``names``, which hold every source feature and more (ours; the fault feature
+    of a lossy or delayed network, say). The input layer's columns are copied by name and a new feature's column is
+    zero, so the widened actor's logits are the source's whatever the new features hold."""
+    if getattr(actor, "name", None) != "pooling":
+        raise ValueError("only the pooling actor takes new observation features, not the "
+                         f"{getattr(actor, 'name', actor)} actor")
+    (source_own, source_task), (own, task) = source, names
+    missing = sorted((set(source_own) - set(own)) | (set(source_task) - set(task)))
+    if missing:
+        raise ValueError(f"this run's observation lacks the source's features {missing}")
+    key = "actor.encode.0.weight"                       # PoolingEncoder.encode over [task features | own features]
+    weight = state[key]
+    if weight.shape[1] != len(source_task) + len(source_own):
+        raise ValueError(f"the source's {key} has {weight.shape[1]} inputs, its features name "
+                         f"{len(source_task) + len(source_own)}")
+    widened = weight.new_zeros((weight.shape[0], len(task) + len(own)))
+    for k, name in enumerate(task):
+        if name in source_task:
+            widened[:, k] = weight[:, source_task.index(name)]
+    for k, name in enumerate(own):
+        if name in source_own:
+            widened[:, len(task) + k] = weight[:, len(source_task) + source_own.index(name)]
+    return {**state, key: widened}
 
 
 def task_logits(pass_logit: th.Tensor, per_task: th.Tensor, mask: th.Tensor, name: str) -> th.Tensor:

@@ -29,6 +29,7 @@ def check_fields(cfg: Any, facts: Sequence[Field]) -> None:
     _check_joins(cfg)
     _check_popups(cfg)
     _check_asynchronous(cfg)
+    _check_release(cfg)
     _check_generator(cfg)
 
 
@@ -155,6 +156,11 @@ def _check_asynchronous(cfg: Any) -> None:
             fail(name, (low, high), "[fewest, most] with the upper bound >= the lower bound")
     if cfg.asynchronous and cfg.n_agents > stamps.MAX_AGENTS:
         fail("n_agents", cfg.n_agents, f"at most {stamps.MAX_AGENTS} with consensus acbba (timestamp stamper ids)")
+
+
+def _check_release(cfg: Any) -> None:
+    if cfg.release_guard != "none" and not cfg.release_actions:
+        fail("release_guard", cfg.release_guard, "release_actions = true (the guard restricts release actions)")
 
 
 def _check_generator(cfg: Any) -> None:

@@ -373,7 +373,7 @@ class TaskAllocEnv(ParallelEnv):
         if kind is ActionKind.BID:
             return self.protocol.explain_bid(i, task)
         if kind is ActionKind.RELEASE:
-            return f"task {task} is not in {agent}'s bundle {self.protocol.knowledge.bundles[i]}"
+            return f"{agent} may not release task {task}: {self.protocol.explain_release(i, task)}"
         return "quitting needs task_quitting on, L_j > 1, membership, an incomplete group, no earlier quit, " \
                f"and T − H > delta = {self.config.delta}"
 

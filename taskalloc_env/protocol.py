@@ -37,7 +37,7 @@ from taskalloc_env.config import TaskAllocConfig, episode_bound
 from taskalloc_env.consensus import Snapshot, Traffic, exchange, snapshot
 from taskalloc_env.group_table import GroupTable
 from taskalloc_env.kernels.quits import quittable
-from taskalloc_env.knowledge import LocalKnowledge
+from taskalloc_env.knowledge import NEVER, LocalKnowledge
 from taskalloc_env.network import CommGraph, dropout_schedule, join_schedule, make_network
 from taskalloc_env.releases import release_ticks
 from taskalloc_env.scenario import Scenario
@@ -104,6 +104,8 @@ class Protocol:
         self._last_groups = self.knowledge.groups.copy()
         self._last_bundles: list[list[int]] = [[] for _ in range(s.n_agents)]
         self._pending_quits: dict[tuple[int, int], None] = {}     # (quitter, task): quits no other agent saw yet
+        self._bid_round = np.full((s.n_agents, s.n_tasks), NEVER, dtype=np.int64)   # round of i's latest bid on j
+        self._released = np.zeros((s.n_agents, s.n_tasks), dtype=bool)             # i released j (release actions)
 
     # -- cached derived state ------------------------------------------------------------------------------------
     def _touch(self, agent: int | None = None) -> None:
@@ -209,6 +211,7 @@ class Protocol:
         self.knowledge.add_to_bundle(agent, task, int(view.slot[agent, task]), value, self.round,
                                      displaced=int(view.displaced[agent, task]))
         self.counters.bids += 1
+        self._bid_round[agent, task] = self.round
         self._pending_quits.pop((agent, task), None)        # re-bid before anyone saw the quit: it stays unseen
         self._touch(agent)
         return value
@@ -252,10 +255,25 @@ class Protocol:
 
     def release_options(self) -> np.ndarray:
         """(N, M) releases the protocol allows now (``release_actions``): every task of the agent's own bundle, where
-        an outbid release could start (thesis §2.2.4); none with the option off."""
+        an outbid release could start (thesis §2.2.4); with ``release_guard = exchange`` only the tasks it bid on in
+        an earlier round (tick), whose bids an exchange has since set against the others'; with ``once`` only those
+        it never released before; none with the option off."""
         if not self.cfg.release_actions:
             return self._no_quits
-        return self.view().in_bundle
+        guard = self.cfg.release_guard
+        if guard == "none":
+            return self.view().in_bundle
+        allowed = self.view().in_bundle & (self._bid_round < self.round)
+        return allowed & ~self._released if guard == "once" else allowed
+
+    def explain_release(self, agent: int, task: int) -> str:
+        """Why ``release_options`` refuses ``agent`` a release of ``task``."""
+        if task not in self.knowledge.bundles[agent]:
+            return f"it is not in its bundle {self.knowledge.bundles[agent]}"
+        if self._released[agent, task]:
+            return "it released it once already and release_guard = once allows one release per agent and task"
+        return (f"it bid on it in this round ({self.round}) and release_guard = {self.cfg.release_guard} allows a "
+                "release only after the exchange that follows the bid")
 
     def release(self, agent: int, task: int) -> list[int]:
         """Agent gives ``task`` up of its own accord (``release_actions``; ours): ``task`` and every task after it
@@ -266,9 +284,9 @@ class Protocol:
             raise ProtocolError(f"agent {agent} may not release task {task}: release actions need "
                                 "release_actions=True")
         if not self.release_options()[agent, task]:
-            raise ProtocolError(f"agent {agent} may not release task {task}: it is not in its bundle "
-                                f"{self.knowledge.bundles[agent]}")
+            raise ProtocolError(f"agent {agent} may not release task {task}: {self.explain_release(agent, task)}")
         released = self.knowledge.release(agent, task, self.cfg.release_order)
+        self._released[agent, task] = True
         self.counters.releases += 1
         self._touch(agent)
         return released

@@ -346,11 +346,40 @@ def _learned_rows() -> list[tuple[str, int, str]]:
 
 @pytest.mark.parametrize("folder,run,policy", _learned_rows())
 def test_committed_leaderboard_models_load_by_name_and_reproduce_their_scores(folder, run, policy):
-    """Each learned run of docs/benchmark.md loads by name and replays its first recorded test episodes exactly."""
+    """Each learned run of docs/benchmark.md loads by name and replays its first two recorded test episodes of the
+    first task it was scored on (Small where it was) exactly."""
     from taskalloc.evaluation.suite_episodes import play
     with (LEADERBOARD / folder / "episodes.csv").open(encoding="utf-8") as handle:
-        recorded = [r for r in csv.DictReader(handle) if int(r["run"]) == run and r["task"] == "taskalloc/Small-v0"]
-    assert recorded, f"{folder}: no Small episodes for run {run}"
-    for row in recorded[:2]:
+        recorded = [r for r in csv.DictReader(handle) if int(r["run"]) == run]
+    assert recorded, f"{folder}: no episodes for run {run}"
+    tasks = [r["task"] for r in recorded]
+    first = "taskalloc/Small-v0" if "taskalloc/Small-v0" in tasks else tasks[0]
+    for row in [r for r in recorded if r["task"] == first][:2]:
         replay = play((policy, row["task"], int(row["seed"]), "noop"))
         assert replay["score"] == float(row["score"]) and replay["instance"] == row["instance"]
+
+
+def test_versus_compares_each_run_with_the_baseline_on_the_same_seeds(tmp_path, capsys):
+    """``--versus``: per run and task the share of the baseline's mean score, the paired p and the wins, from the
+    committed episodes; the baseline against itself is 100 % with p = 1; a baseline of several runs, a folder
+    without episodes and a seed that is another instance are refused in one line."""
+    from taskalloc.evaluation.versus import versus_table
+    base, mappo = LEADERBOARD / "cbgabi", LEADERBOARD / "learned_mappo_small_pooling_432k"
+    table = versus_table(base, [base, mappo]).splitlines()
+    assert table[0] == "| policy | run | task | episodes | % of CBGABI | paired p | wins |"
+    assert "| CBGABI | 0 | Small | 100 | 100.00 | 1.00 | 0/100 |" in table
+    assert "| MAPPO, pooling actor, 432 k | 0 | Small | 100 | 102.01 | <0.001 | 53/100 |" in table
+    assert sum(line.startswith("| MAPPO") for line in table) == 3
+    assert cli(["benchmark", "--versus", str(base), str(mappo)]) == 0
+    assert "| MAPPO, pooling actor, 432 k | 2 | Small | 100 | 101.71 | 0.003 | 50/100 |" in capsys.readouterr().out
+    with pytest.raises(ConfigError, match=r"must hold one run, it holds 3"):
+        versus_table(mappo, [base])
+    with pytest.raises(ConfigError, match=r"holds no episodes\.csv"):
+        versus_table(base, [tmp_path])
+    rows = (mappo / "episodes.csv").read_text(encoding="utf-8").splitlines()
+    first = rows[1].split(",")
+    first[4] = "another-instance"
+    (tmp_path / "episodes.csv").write_text("\n".join([rows[0], ",".join(first)]) + "\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"Small-v0 seed 50000 is another instance"):
+        versus_table(base, [tmp_path])
+    assert cli(["benchmark", "--versus", str(base)]) == 2

@@ -90,33 +90,46 @@ def test_masks_allow_a_release_exactly_where_the_agent_may_release():
                 assert mask[i, encode_release(j, m)] == (can_release[i, j] and not passed[i])
 
 
+@pytest.mark.parametrize("guard", ["none", "exchange", "once"])
 @pytest.mark.parametrize("consensus", ["sync", "every_step", "acbba"])
-def test_the_env_s_release_columns_are_the_agent_s_bundle_while_it_may_act(consensus):
+def test_the_env_s_release_columns_are_the_agent_s_bundle_while_it_may_act(consensus, guard):
     """In every step of random masked play the release column of task j is set iff j is in the agent's bundle and the
-    agent may act (it has not passed; under ``acbba``, its builder is ready); a release zeroes its own bids."""
+    agent may act (it has not passed; under ``acbba``, its builder is ready) and, with ``release_guard = exchange``,
+    the agent's latest bid on j was made in an earlier round (tick) than now, and with ``once`` it never released j
+    (both tracked here from the actions taken); a release zeroes its own bids."""
     env = TaskAllocEnv(n_agents=4, n_tasks=6, agents_per_task=[1, 2], consensus=consensus, release_actions=True,
-                       invalid_action="raise")
+                       release_guard=guard, invalid_action="raise")
     m = env.config.n_tasks
     assert env.action_space("uav_0").n == 1 + 3 * m
     obs, _ = env.reset(seed=4)
     rng = np.random.default_rng(4)
-    seen = 0
+    seen, guarded = 0, 0
+    bid_round, released = np.full((4, m), -1), np.zeros((4, m), dtype=bool)
     while env.agents and env.protocol.round < 12:
-        kn = env.protocol.knowledge
+        kn, now = env.protocol.knowledge, env.protocol.round
         for a in env.agents:
             i = env.agent_index[a]
             expected = np.zeros(m, dtype=np.int8)
             if not env._engine.passed[i]:
                 expected[kn.bundles[i]] = 1
+                if guard != "none":
+                    held = (bid_round[i] == now) | (released[i] if guard == "once" else False)
+                    guarded += int(expected[held].sum())
+                    expected[held] = 0
             np.testing.assert_array_equal(obs[a]["action_mask"][release_columns(m)], expected, err_msg=a)
         actions = {a: int(rng.choice(np.flatnonzero(obs[a]["action_mask"]))) for a in env.agents}
         obs, *_ = env.step(actions)
         for a, action in actions.items():
             kind, j = decode(action, m)
+            if kind is ActionKind.BID:
+                bid_round[env.agent_index[a], j] = now
             if kind is ActionKind.RELEASE:
                 seen += 1
+                released[env.agent_index[a], j] = True
                 assert j not in kn.bundles[env.agent_index[a]] and kn.own_bids()[env.agent_index[a], j] == 0
     assert seen and env.protocol.counters.releases == seen
+    # a bid and its release in one round happen only in a synchronous round; a second release anywhere
+    assert (guarded > 0) == (guard == "once" or (guard == "exchange" and consensus == "sync")), guarded
 
 
 # -- a release, a re-bid, refusals -------------------------------------------------------------------------------------
@@ -156,10 +169,94 @@ def test_a_release_of_a_task_outside_the_bundle_is_refused_naming_agent_action_a
     env.reset(seed=0)
     env.step({"uav_0": encode_bid(1), "uav_1": PASS})
     with pytest.raises(InvalidActionError, match=r"action 9 \(release task 2\) of uav_0 is not allowed by its "
-                                                 r"mask: task 2 is not in uav_0's bundle \[1\]"):
+                                                 r"mask: uav_0 may not release task 2: it is not in its bundle \[1\]"):
         env.step({"uav_0": encode_release(2, 3), "uav_1": PASS})
     with pytest.raises(ProtocolError, match="agent 0 may not release task 2: it is not in its bundle"):
         env.protocol.release(0, 2)
+
+
+def test_the_exchange_guard_allows_a_release_only_after_the_round_of_the_bid():
+    """With ``release_guard = exchange`` a task bid in this round cannot be released (mask 0, a clear refusal from the
+    env and from the protocol); once the round has ended (both agents passed) it can; a re-bid in the new round is
+    again held until the next exchange. With ``once`` the re-bid task stays held after that exchange too. With
+    ``none`` the same release is allowed at once."""
+    env = two_task_line(release_guard="exchange")
+    env.reset(seed=0)
+    obs, *_ = env.step({"uav_0": encode_bid(1), "uav_1": PASS})
+    assert obs["uav_0"]["action_mask"][encode_release(1, 3)] == 0
+    with pytest.raises(InvalidActionError, match=r"action 8 \(release task 1\) of uav_0 is not allowed by its mask: "
+                                                 r"uav_0 may not release task 1: it bid on it in this round \(0\) and "
+                                                 r"release_guard = exchange allows a release only after the exchange"):
+        env.step({"uav_0": encode_release(1, 3), "uav_1": PASS})
+    with pytest.raises(ProtocolError, match=r"agent 0 may not release task 1: it bid on it in this round"):
+        env.protocol.release(0, 1)
+    obs, *_ = env.step({"uav_0": PASS, "uav_1": PASS})
+    assert env.protocol.round == 1 and obs["uav_0"]["action_mask"][encode_release(1, 3)] == 1
+    env.step({"uav_0": encode_release(1, 3), "uav_1": PASS})
+    obs, *_ = env.step({"uav_0": encode_bid(1), "uav_1": PASS})
+    assert 1 in env.protocol.knowledge.bundles[0] and obs["uav_0"]["action_mask"][encode_release(1, 3)] == 0
+    once = two_task_line(release_guard="once")
+    once.reset(seed=0)
+    once.step({"uav_0": encode_bid(1), "uav_1": PASS})
+    once.step({"uav_0": PASS, "uav_1": PASS})
+    once.step({"uav_0": encode_release(1, 3), "uav_1": PASS})
+    once.step({"uav_0": encode_bid(1), "uav_1": PASS})
+    obs, *_ = once.step({"uav_0": PASS, "uav_1": PASS})
+    assert once.protocol.round == 2 and obs["uav_0"]["action_mask"][encode_release(1, 3)] == 0
+    with pytest.raises(ProtocolError, match=r"agent 0 may not release task 1: it released it once already and "
+                                            r"release_guard = once allows one release per agent and task"):
+        once.protocol.release(0, 1)
+    free = two_task_line()
+    free.reset(seed=0)
+    obs, *_ = free.step({"uav_0": encode_bid(1), "uav_1": PASS})
+    assert obs["uav_0"]["action_mask"][encode_release(1, 3)] == 1
+
+
+class ReleaseFirst(Policy):
+    """Release the lowest allowed task, else bid on the lowest biddable one, else pass: the bid–release cycle."""
+
+    name = "release-first"
+
+    def act(self, observations: Mapping[str, Mapping[str, np.ndarray]],
+            infos: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, int]:
+        m = self.n_tasks
+        actions = {}
+        for a, o in observations.items():
+            releases = np.flatnonzero(o["action_mask"][release_columns(m)])
+            bids = np.flatnonzero(o["action_mask"][bid_columns(m)])
+            actions[a] = int(encode_release(releases[0], m) if releases.size else encode_bid(bids[0]) if bids.size
+                             else PASS)
+        return actions
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_exchange_guard_ends_every_round_that_release_first_play_would_hold_open(seed):
+    """Without the guard an agent that always releases what it just bid never passes, so the first round runs until
+    ``max_cycles``; with ``release_guard = exchange`` each round ends within 1 + 5M steps (per agent and round at
+    most M releases of earlier bids, 3M bids, M quits); with ``once`` besides, the episode converges after at most
+    N · M releases."""
+    m = 6
+    rounds = {}
+    for guard in ("none", "exchange", "once"):
+        env = TaskAllocEnv(n_agents=3, n_tasks=m, agents_per_task=[1, 2], release_actions=True, release_guard=guard,
+                           max_cycles=300)
+        policy = ReleaseFirst()
+        obs, infos = env.reset(seed=seed)
+        policy.start(env, seed)
+        steps_in_round, longest, truncated = 0, 0, False
+        while env.agents:
+            before = env.protocol.round
+            obs, _, _, truncs, infos = env.step(policy.act(obs, infos))
+            steps_in_round += 1
+            longest = max(longest, steps_in_round)
+            if env.protocol.round != before:
+                steps_in_round = 0
+            truncated = any(truncs.values())
+        rounds[guard] = (env.protocol.round, longest, truncated, env.protocol.counters.releases,
+                         env.protocol.converged)
+    assert rounds["none"][0] == 0 and rounds["none"][1] == 300 and rounds["none"][2], rounds
+    assert rounds["exchange"][1] <= 1 + 5 * m and rounds["exchange"][0] > 1 and rounds["exchange"][3] > 0, rounds
+    assert rounds["once"][1] <= 1 + 5 * m and 0 < rounds["once"][3] <= 3 * m and rounds["once"][4], rounds
 
 
 def test_without_the_option_there_is_no_release_action():

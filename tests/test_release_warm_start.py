@@ -11,7 +11,13 @@ import pytest
 import torch as th
 
 from taskalloc.policies import checkpoint, make_policy
-from taskalloc.policies.networks import RELEASE_BIAS, AttentionActor, PoolingActor, with_release_head
+from taskalloc.policies.networks import (
+    RELEASE_BIAS,
+    AttentionActor,
+    PoolingActor,
+    with_new_features,
+    with_release_head,
+)
 from taskalloc.training import mappo
 from taskalloc_env import TaskAllocEnv
 from taskalloc_env.actions import release_columns
@@ -130,3 +136,37 @@ def test_mappo_init_from_starts_the_release_run_from_the_committed_model(tmp_pat
                                                 r"\.weight has shape \(64, 29\), this actor's \(32, 29\)"):
         mappo.main(["--config", "mappo_small_release", "--hidden", "32", "--init-from", "mappo_small_pooling_1m",
                     "--total-steps", "0", "--out-dir", str(tmp_path / "narrow")])
+
+
+def test_new_observation_features_start_at_zero_so_the_widened_actor_plays_as_its_source():
+    """``with_new_features``: a pooling actor over one more per-task feature (inserted in the middle) and one more own
+    feature gives the source's logits on the same observations, whatever the new features hold; a source feature
+    the run lacks, and an attention actor, are refused in one line."""
+    source = distinct_source("pooling")                              # own 7, per task 22
+    own, task = [f"o{k}" for k in range(7)], [f"t{k}" for k in range(22)]
+    wide_own, wide_task = [*own, "o_new"], [*task[:5], "t_new", *task[5:]]
+    widened = PoolingActor(8, 23, 16, kinds=2)
+    widened.load_state_dict(with_new_features(widened, source.state_dict(), (own, task), (wide_own, wide_task)))
+    rng = np.random.default_rng(0)
+    own_rows, task_rows = rng.normal(size=(6, 7)), rng.normal(size=(6, N_TASKS, 22))
+    masks = th.ones((6, 1 + 2 * N_TASKS), dtype=th.bool)
+    plain = th.as_tensor(np.concatenate([own_rows, task_rows.reshape(6, -1)], axis=1), dtype=th.float32)
+    wide_tasks = np.concatenate([task_rows[:, :, :5], rng.normal(size=(6, N_TASKS, 1)), task_rows[:, :, 5:]], axis=2)
+    wide = th.as_tensor(np.concatenate([own_rows, rng.normal(size=(6, 1)), wide_tasks.reshape(6, -1)], axis=1),
+                        dtype=th.float32)
+    with th.no_grad():
+        th.testing.assert_close(widened.eval()(wide, masks), source(plain, masks))
+    with pytest.raises(ValueError, match=r"^this run's observation lacks the source's features \['t3'\]$"):
+        with_new_features(widened, source.state_dict(), (own, task), (wide_own, [t for t in wide_task if t != "t3"]))
+    with pytest.raises(ValueError, match=r"^only the pooling actor takes new observation features, not the "
+                                         r"attention actor$"):
+        with_new_features(small_actor("attention", 2), source.state_dict(), (own, task), (wide_own, wide_task))
+
+
+def test_a_release_run_on_a_faulty_network_starts_from_the_perfect_link_model(tmp_path):
+    """``taskalloc mappo --config mappo_lossy_release --init-from mappo_small_pooling_s0`` (no updates): the Lossy
+    observation has the fault feature the source lacks, so the actor is widened and the critic starts afresh."""
+    summary = mappo.main(["--config", "mappo_lossy_release", "--init-from", "mappo_small_pooling_s0",
+                          "--total-steps", "0", "--eval-episodes", "1", "--out-dir", str(tmp_path / "lossy")])
+    assert summary["init_from"] == ["actor"]
+    assert "member_silence" in checkpoint.load(tmp_path / "lossy").task_features

@@ -63,6 +63,7 @@ from taskalloc.policies.networks import (
     AttentionActor,
     PoolingActor,
     count_parameters,
+    with_new_features,
     with_release_head,
 )
 from taskalloc.training.config import (
@@ -349,13 +350,23 @@ class Evaluator:
 
 
 def load_weights(model: ActorCritic, source: str, hook: PartnerHook | None = None,
-                 release_bias: float = RELEASE_BIAS) -> list[str]:
+                 release_bias: float = RELEASE_BIAS, names: tuple[tuple[str, ...], tuple[str, ...]] | None = None,
+                 ) -> list[str]:
     """Start from a checkpoint's actor weights and, when its folder holds one, its critic (``init_from``); an actor
-    without release logits starts one with them (``with_release_head``, its release logit at ``release_bias``)."""
+    without release logits starts one with them (``with_release_head``, its release logit at ``release_bias``). When
+    this run's observation features ``names`` (own, per task) add to the source's, the actor's new inputs start at
+    zero (``with_new_features``) and the critic, whose state then differs too, starts afresh."""
     json_path = Path(str(resolve(source)))
     json_path = json_path / "model.json" if json_path.is_dir() else json_path.with_suffix(".json")
     source_checkpoint = checkpoint.load(json_path)
     actor_state = source_checkpoint.actor.state_dict()
+    source_names = (source_checkpoint.own_features, source_checkpoint.task_features)
+    widened = names is not None and tuple(map(tuple, source_names)) != tuple(map(tuple, names))
+    if widened:
+        try:
+            actor_state = with_new_features(model.actor, actor_state, source_names, names)
+        except ValueError as exc:
+            raise ConfigError(f"init_from {source}: {exc}") from None
     source_kinds, kinds = getattr(source_checkpoint.actor, "kinds", 2), getattr(model.actor, "kinds", 2)
     if (source_kinds, kinds) == (2, 3):
         try:
@@ -366,7 +377,7 @@ def load_weights(model: ActorCritic, source: str, hook: PartnerHook | None = Non
         raise ConfigError(f"init_from {source}: its actor has release logits and this run has no release_actions; "
                           "only an actor without them can start one with them")
     states = [("actor", model.actor, actor_state)]
-    if (json_path.parent / CRITIC_FILE).is_file():
+    if (json_path.parent / CRITIC_FILE).is_file() and not widened:
         states.append(("critic", model.critic, load_file(str(json_path.parent / CRITIC_FILE))))
     for name, module, state in states:
         try:
@@ -427,7 +438,8 @@ def main(argv: Sequence[str] | None = None, hook: PartnerHook | None = None) -> 
     actor = make_actor(cfg, layout.own_size, layout.task_size, groups[0].kinds)
     model = ActorCritic(actor, StateCritic(layout.n_equipment, cfg.hidden, cfg.heads))
     if cfg.init_from:
-        summary["init_from"] = load_weights(model, cfg.init_from, hook, cfg.release_bias)
+        summary["init_from"] = load_weights(model, cfg.init_from, hook, cfg.release_bias,
+                                              (layout.own_names, layout.task_names))
     optimizer = th.optim.Adam(model.parameters(), lr=cfg.learning_rate, eps=1e-5)
     summary["parameters"] = {"actor": count_parameters(model.actor), "critic": count_parameters(model.critic)}
     evaluator = Evaluator(groups, cfg, out_dir / "eval.csv")

@@ -25,6 +25,13 @@ PROTOCOL_GROUP = group("protocol", (
           meaning=('release actions allowed: an agent may drop a task of its own bundle and every task after it, as '
                    'an outbid release does (the action space grows to 1 + 3M)'),
           source='ours (the release rule: thesis §2.2.4; Johnson (3.11)–(3.12)); PI needs it (Zhao et al. 2016)'),
+    Field('release_guard', 'choice', choices=('none', 'exchange', 'once'), default='none',
+          meaning=('with `release_actions`, a task can be released at any step \\| `exchange`: only in a later round '
+                   '(tick) than the agent\'s bid on it, once an exchange has brought the others\' bids, so no '
+                   'bid–release cycle can hold a round open \\| `once`: as `exchange`, and each agent releases each '
+                   'task at most once, so the releases of an episode are finite'),
+          source=('ours; `exchange` after Johnson §4.2 (a replan follows new situational awareness), `once` after '
+                  'the once-per-task quit (thesis §5.2.2, Alg 9)')),
     Field('delta', 'int', low=0, time_like=True, default=1,
           meaning=('δ: rounds an incomplete group is held before a quit is allowed; the scripted CBGA+TQ and CBGABI '
                    'quit with this δ'),
