@@ -21,9 +21,10 @@ the final allocation, step by step (``tests/test_vector.py``). Two engines step 
   (``vector_arrays``, ``kernels.batch``), running the single env's rules through the same compiled kernels (the
   merge, the bid rows, path timing, the paid groups, the observation features, the masks). Its scope: the
   synchronous consensus (``consensus="sync"``, the default, and ``"every_step"``), perfect links or independent
-  message loss (``message_loss`` > 0 with ``loss_model="independent"``, no ``max_delay``), task quitting, any
-  scenario, scoring and bidding option, with no pop-up tasks, no ``release_actions`` and ``require_known_capacity``
-  off. A new instance is still drawn in Python at each reset (``TaskAllocEnv._begin``) and copied in.
+  message loss (``message_loss`` > 0 with ``loss_model="independent"``, no ``max_delay``), task quitting, release
+  actions (every ``release_guard``), any scenario, scoring and bidding option, with no pop-up tasks and
+  ``require_known_capacity`` off. A new instance is still drawn in Python at each reset (``TaskAllocEnv._begin``)
+  and copied in.
 * ``"instances"``: each instance stepped in turn by the single env's step (``TaskAllocEnv._advance``: the step
   engine, ``engine.StepEngine``); every other option.
 

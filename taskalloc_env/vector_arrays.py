@@ -2,7 +2,8 @@
 over the instance axis (``kernels.batch``).
 
 ``ArrayBatch`` holds every instance's state as arrays: the group tables (member ids, bids, counts, own bids),
-timestamps and discovered agents, bundles and paths (padded, with their lengths), the quit timers, the path table,
+timestamps and discovered agents, bundles and paths (padded, with their lengths), the quit timers, the round of each
+agent's latest bid on each task and its releases (the release guard's state), the path table,
 the bid view, the last round's tables for the convergence test, the network's counters, and the integer and float
 state of ``kernels.batch`` (round, steps, counters, flags; score, reward, scales). An instance starts from a single env
 reset in Python (``load``: the scenario, the protocol's derived arrays and the observation's fixed columns are copied
@@ -10,8 +11,9 @@ in; resets are rare) and is then stepped only here. ``sync`` writes an instance 
 rarely (``evaluate``, the reason an action was masked).
 
 Scope (``unsupported`` names what is outside it): the synchronous consensus (``sync`` and ``every_step``), perfect
-links or independent message loss (``loss_model="independent"``, no delay), no pop-up tasks, no release actions,
-``require_known_capacity`` off, the compiled kernels on (``TASKALLOC_KERNELS`` unset). Task quitting is in.
+links or independent message loss (``loss_model="independent"``, no delay), no pop-up tasks, ``require_known_capacity``
+off, the compiled kernels on (``TASKALLOC_KERNELS`` unset). Task quitting and release actions (every
+``release_guard``, either ``release_order``) are in.
 """
 
 from __future__ import annotations
@@ -43,7 +45,8 @@ COUNTERS = {"rounds": batch.ROUND, "messages": batch.MESSAGES, "informative_mess
             "rounds_to_agreement": batch.TO_AGREEMENT, "messages_to_agreement": batch.MESSAGES_TO_AGREEMENT,
             "messages_sent": batch.SENT, "messages_lost": batch.LOST, "data_items_sent": batch.ITEMS_SENT,
             "max_agent_messages": batch.MAX_AGENT, "conflicting_bids": batch.CONFLICTING,
-            "silent_releases": batch.SILENT, "quits": batch.QUITS, "quits_seen": batch.QUITS_SEEN}
+            "silent_releases": batch.SILENT, "quits": batch.QUITS, "quits_seen": batch.QUITS_SEEN,
+            "releases": batch.RELEASES}
 
 
 def unsupported(cfg: TaskAllocConfig) -> str | None:
@@ -56,7 +59,6 @@ def unsupported(cfg: TaskAllocConfig) -> str | None:
          f"loss_model={cfg.loss_model!r} (only 'independent')"),
         (cfg.max_delay == 0, "max_delay > 0"),
         (cfg.popup_tasks == 0, "popup_tasks > 0"),
-        (not cfg.release_actions, "release_actions"),
         (not cfg.require_known_capacity, "require_known_capacity"),
     ]
     for ok, reason in checks:
@@ -90,6 +92,7 @@ class ArrayBatch:
         self.strict = cfg.outbid_ties == "strict"
         self.task_quitting, self.delta = bool(cfg.task_quitting), int(cfg.delta)
         self.reset_on_additions, self.until_joined = cfg.reset_on == "additions", cfg.quit_block == "until_joined"
+        self.guard = batch.RELEASE_GUARDS[cfg.release_guard]
         names = layout.task_names
         self.columns = np.array([names.index(c) for c in KERNEL_COLUMNS], dtype=np.int64)
         self.silence_column = names.index("member_silence") if "member_silence" in names else -1
@@ -106,6 +109,7 @@ class ArrayBatch:
         self.paths, self.path_len = z(n, m, dtype=i64), z(n, dtype=i64)
         self.assigned_at, self.quit = z(n, m, dtype=i64), z(n, m, dtype=b)
         self.quit_blocked, self.pending = z(n, m, dtype=b), z(n, m, dtype=b)      # pending: quits nobody saw yet
+        self.bid_round, self.released = z(n, m, dtype=i64), z(n, m, dtype=b)      # Protocol._bid_round, _released
         self.last_count, self.last_ids, self.last_values = z(n, m, dtype=i64), z(n, m, w, dtype=i64), z(n, m, w)
         self.last_bundles, self.last_bundle_len = z(n, m, dtype=i64), z(n, dtype=i64)
         self.last_heard, self.sent_by = z(n, n, dtype=i64), z(n, dtype=i64)
@@ -159,6 +163,7 @@ class ArrayBatch:
         self.bundle_len[k] = self.path_len[k] = self.last_bundle_len[k] = 0
         self.assigned_at[k], self.quit[k], self.quit_blocked[k] = kn.assigned_at, kn.quit, kn.quit_blocked
         self.pending[k] = False
+        self.bid_round[k], self.released[k] = p._bid_round, p._released
         self.last_heard[k], self.sent_by[k] = 0, 0
         self.passed[k] = env._engine.passed
         self.dirty[k] = self.stale[k] = True      # every path is timed (empty) and every row viewed at the start
@@ -198,6 +203,7 @@ class ArrayBatch:
         kn.timestamps[:], kn.known[:], kn.assigned_at[:] = self.stamps[k], self.known[k], self.assigned_at[k]
         kn.quit[:], kn.quit_blocked[:] = self.quit[k], self.quit_blocked[k]
         p._pending_quits = {(int(i), int(j)): None for i, j in zip(*np.nonzero(self.pending[k]))}
+        p._bid_round[:], p._released[:] = self.bid_round[k], self.released[k]
         kn.bundles = [self.bundles[k, i, :self.bundle_len[k, i]].tolist() for i in range(self.n)]
         kn.paths = [self.paths[k, i, :self.path_len[k, i]].tolist() for i in range(self.n)]
         p.round, p.stable_rounds = int(ist[batch.ROUND]), int(ist[batch.STABLE])
@@ -228,7 +234,8 @@ class ArrayBatch:
                             self.quit, self.quit_blocked, self.pending, self.count, self.ids, self.values, self.own,
                             self.capacity, self.view_bid, self.slot, self.displaced, self.speed, self.dist_at,
                             self.dist_tt, self.earliest, self.deadline, self.doable, self.duration, self.task_start,
-                            self.pay, self.gain, self.pt_members, self.pt_reward, self.pt_start, self.pt_cost)
+                            self.pay, self.gain, self.pt_members, self.pt_reward, self.pt_start, self.pt_cost,
+                            self.bid_round, self.released)
         if not self.perfect:
             links = self.statics[:, batch.N_LINKS]
             for k in np.flatnonzero(self.istate[:, batch.ENDS_ROUND]).tolist():
@@ -255,13 +262,14 @@ class ArrayBatch:
     def observe(self, which: np.ndarray, masks: np.ndarray) -> None:
         """The observations of the instances in ``which`` (their rows of ``obs``) and their rows of ``masks``."""
         batch.observe_all(which, self.prereq_mode, self.warping, self.strict, self.silence_column,
-                          self.task_quitting, self.delta, self.columns, self.istate, self.fstate, self.statics,
+                          self.task_quitting, self.delta, self.guard, self.columns, self.istate, self.fstate,
+                          self.statics,
                           self.passed, self.stale, self.count, self.ids, self.values, self.own, self.stamps,
                           self.assigned_at, self.quit, self.quit_blocked, self.bundle_len, self.single, self.gain,
                           self.equipment_match, self.fillable, self.capacity, self.restricted, self.required,
                           self.agent_eq, self.prereqs, self.view_bid, self.outbid, self.eligible, self.prereqs_met,
                           self.members, self.group_total, self.lowest_bid, self.displaced, self.displaced_bid,
-                          self.in_bundle, self.tasks, self.own_features, masks)
+                          self.in_bundle, self.bid_round, self.released, self.tasks, self.own_features, masks)
 
     # -- outputs -------------------------------------------------------------------------------------------------------
     def figures(self) -> dict[str, np.ndarray]:

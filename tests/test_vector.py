@@ -3,14 +3,15 @@
 The equality property drives K single envs and the batch with the same joint actions, chosen by a policy from the
 single envs' own observations (random masked, CBGABI, a committed learned policy; now and then an action outside the
 mask), over random scenarios and options (both synchronous consensus modes and the asynchronous one; perfect, lossy,
-bursty, fading and delayed links; pop-up tasks; release actions), across autoresets, and compares observations,
-masks, rewards, flags, infos, states and the final allocations byte for byte, on both engines (``arrays``: the
-compiled step over the instance axis, within its scope; ``instances``: each env in turn). Then the autoreset modes,
-seeding, the choice of engine and bad input.
+bursty, fading and delayed links; pop-up tasks; release actions under every guard), across autoresets, and compares
+observations, masks, rewards, flags, infos, states and the allocations with their counters byte for byte, on both
+engines (``arrays``: the compiled step over the instance axis, within its scope; ``instances``: each env in turn).
+Then the autoreset modes, seeding, the choice of engine and bad input.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -67,6 +68,9 @@ def arrays_options(draw) -> dict:
         kw["message_loss"] = draw(st.sampled_from([0.1, 0.4]))
     if network.endswith("range"):
         kw["comm_range"] = draw(st.floats(0.5, 4.0))
+    kw["task_quitting"] = draw(st.booleans())
+    if draw(st.integers(0, 2)) == 0:
+        kw.update(release_actions=True, release_guard=draw(st.sampled_from(["none", "exchange", "once"])))
     return kw
 
 
@@ -150,9 +154,18 @@ def check_instance(k: int, env: TaskAllocEnv, single: tuple, batch: tuple) -> No
     assert b_infos["unresolved"][k] == first.get("unresolved")
 
 
-def run_equal(kw: dict, policy_name: str, seed: int, steps: int, slip: float = 0.05, engine: str = "auto") -> int:
-    """Drive the batch (on ``engine``) and the single envs together for ``steps`` steps; returns the episodes that
-    ended."""
+@dataclasses.dataclass
+class Played:
+    """What ``run_equal`` played: the episodes that ended and the release actions taken in them."""
+
+    ended: int
+    releases: int
+
+
+def run_equal(kw: dict, policy_name: str, seed: int, steps: int, slip: float = 0.05, engine: str = "auto") -> Played:
+    """Drive the batch (on ``engine``) and the single envs together for ``steps`` steps, then compare every
+    instance's allocation and counters (``evaluate``, the batch's instance written back into its env) and its release
+    guard's state."""
     if policy_name != "random":
         kw = {**kw, **make_policy(policy_name).env_overrides}
     venv = taskalloc_env.vector_env(K, engine=engine, **kw)
@@ -163,7 +176,7 @@ def run_equal(kw: dict, policy_name: str, seed: int, steps: int, slip: float = 0
         check_instance(k, env, (driver.obs[k], None, False, False, driver.infos[k], 0),
                        (b_obs, np.zeros((K, 1)), np.zeros(K, bool), np.zeros(K, bool), b_infos))
     assert venv.state().tobytes() == np.stack([e.state() for e in driver.envs]).tobytes()
-    ended = 0
+    ended = releases = 0
     for _ in range(steps):
         joint = driver.actions()
         batch = venv.step(joint)
@@ -171,10 +184,15 @@ def run_equal(kw: dict, policy_name: str, seed: int, steps: int, slip: float = 0
             check_instance(k, env, single, batch)
             if single[2] or single[3]:
                 ended += 1
-                mine, theirs = venv.evaluate(k), env.evaluate()
-                assert mine.score == theirs.score and mine.paths == theirs.paths
+                releases += env.protocol.counters.releases
+                assert venv.evaluate(k) == env.evaluate()
         assert venv.state().tobytes() == np.stack([e.state() for e in driver.envs]).tobytes()
-    return ended
+    for k, env in enumerate(driver.envs):
+        releases += env.protocol.counters.releases
+        assert venv.evaluate(k) == env.evaluate()                  # with the counters (``releases`` too)
+        mine, theirs = venv.envs[k].protocol, env.protocol
+        assert np.array_equal(mine._bid_round, theirs._bid_round) and np.array_equal(mine._released, theirs._released)
+    return Played(ended, releases)
 
 
 @pytest.mark.parametrize("policy_name", ["random", "cbgabi"])
@@ -194,14 +212,37 @@ def test_the_arrays_engine_is_the_single_env(policy_name, kw, seed):
 @pytest.mark.slow
 @pytest.mark.parametrize("engine", ["arrays", "instances"])
 def test_equal_under_a_learned_policy_across_autoresets(engine):
-    ended = run_equal({"scenario": "train_small"}, "learned:train_small", seed=7, steps=120, slip=0.0, engine=engine)
-    assert ended >= K                     # every instance went through at least one autoreset
+    played = run_equal({"scenario": "train_small"}, "learned:train_small", seed=7, steps=120, slip=0.0, engine=engine)
+    assert played.ended >= K                # every instance went through at least one autoreset
 
 
 @pytest.mark.parametrize("engine", ["arrays", "instances"])
 @pytest.mark.parametrize("policy_name, loss", [("random", 0.0), ("random", 0.2), ("cbgabi", 0.0), ("cbgabi", 0.2)])
 def test_equal_on_the_default_scenario(engine, policy_name, loss):
     run_equal({"scenario": "default", "message_loss": loss}, policy_name, seed=1, steps=80, slip=0.02, engine=engine)
+
+
+@pytest.mark.parametrize("order", ["bundle", "path"])
+@pytest.mark.parametrize("consensus", ["sync", "every_step"])
+@pytest.mark.parametrize("guard", ["none", "exchange", "once"])
+def test_the_arrays_engine_releases_as_the_single_env(guard, consensus, order):
+    """Random masked play with release actions under each guard and release order, with and without task quitting,
+    on perfect and lossy links: the arrays engine is the single env (the release columns of the masks, the releases
+    and what they drop, the ``releases`` counter, the guard's state), and releases were taken."""
+    for quitting, loss in [(False, 0.0), (True, 0.3)]:
+        kw = {"scenario": "train_small", "release_actions": True, "release_guard": guard, "release_order": order,
+              "consensus": consensus, "task_quitting": quitting, "message_loss": loss}
+        played = run_equal(kw, "random", seed=11, steps=80, slip=0.02, engine="arrays")
+        assert played.releases > 0
+
+
+@pytest.mark.parametrize("guard, loss", [("none", 0.2), ("exchange", 0.0), ("once", 0.0)])
+def test_the_arrays_engine_releases_as_the_single_env_on_the_default_scenario(guard, loss):
+    """Bundles long enough that a path's cost sums pairwise: a release after a change in the same step re-times the
+    changed paths first, as the single env's ``release_options`` does (skipping that fails two cases here)."""
+    kw = {"scenario": "default", "release_actions": True, "release_guard": guard, "task_quitting": True,
+          "message_loss": loss}
+    assert run_equal(kw, "random", seed=1, steps=80, slip=0.02, engine="arrays").releases > 0
 
 
 def same_outputs(a, b) -> None:
@@ -281,6 +322,9 @@ def test_the_arrays_engine_compiles_nothing_once_the_cache_is_warm(tmp_path):
 def test_the_engine_follows_the_options():
     assert taskalloc_env.vector_env(2, scenario="default").engine == "arrays"
     assert taskalloc_env.vector_env(2, scenario="default", message_loss=0.1).engine == "arrays"
+    assert taskalloc_env.vector_env(2, scenario="train_small", release_actions=True).engine == "arrays"
+    assert taskalloc_env.vector_env(2, scenario="train_small", release_actions=True, release_guard="once",
+                                    task_quitting=True, message_loss=0.2).engine == "arrays"
     assert taskalloc_env.vector_env(2, scenario="default", engine="instances").engine == "instances"
     assert taskalloc_env.vector_env(2, scenario="train_small", consensus="acbba").engine == "instances"
     with pytest.raises(ConfigError, match="engine='arrays' does not cover loss_model='gilbert_elliott'"):

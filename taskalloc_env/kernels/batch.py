@@ -6,7 +6,7 @@ rules as the single env through the kernels it already uses (``merge.exchange_al
 ``plan.retime_rows``, ``score.paid_groups``, ``observe.step_features``, ``masks.fill_masks``, ``table.set_member``):
 
 * ``apply_actions``: the joint actions in agent order (``engine.StepEngine.apply``, ``Protocol.bid``,
-  ``Protocol.quit``);
+  ``Protocol.quit``, ``Protocol.release``);
 * ``end_rounds``: Phase 2 of the instances whose round ends (``Protocol.end_round`` on perfect links or under
   independent loss, whose draws the caller makes from each instance's own generator);
 * ``score_all``: the changed paths re-timed (``ScoringModel.refresh``), the team score (``scoring.team_score``),
@@ -38,8 +38,8 @@ NO_TIMER = np.iinfo(np.int64).max          # ``protocol.NO_TIMER``: the quit con
 # columns of the (K, C) integer state
 ROUND, STEPS, STABLE, CONVERGED, UNRESOLVED, BIDS, MESSAGES, INFORMATIVE, DATA_ITEMS, SENT, LOST, ITEMS_SENT, \
     MAX_AGENT, CONFLICTING, TO_AGREEMENT, MESSAGES_TO_AGREEMENT, SILENT, VALID, CONFLICTS, ENDS_ROUND, \
-    TERMINATED, TRUNCATED, INVALID, QUITS, QUITS_SEEN = range(25)
-INT_STATE = 25
+    TERMINATED, TRUNCATED, INVALID, QUITS, QUITS_SEEN, RELEASES = range(26)
+INT_STATE = 26
 # ``Protocol.unresolved`` as a code: none, not settled, disagreement, round bound (``UNRESOLVED_TEXT`` in vector)
 NOT_SETTLED, DISAGREE, ROUND_BOUND = 1, 2, 3
 # columns of the (K, C) float state
@@ -48,6 +48,9 @@ FLOAT_STATE = 7
 # columns of the (K, C) static integers of an instance
 MAX_ROUNDS, DIAMETER, SILENCE_TIMEOUT, MAX_BUNDLE, HAS_PREREQS, EQUIPMENT_ANY, N_LINKS = range(7)
 STATIC_INTS = 7
+# ``release_guard`` as a code for ``observe_all`` (``Protocol.release_options``)
+GUARD_NONE, GUARD_EXCHANGE, GUARD_ONCE = range(3)
+RELEASE_GUARDS = {"none": GUARD_NONE, "exchange": GUARD_EXCHANGE, "once": GUARD_ONCE}
 
 
 @jit
@@ -92,11 +95,13 @@ def apply_actions(which: np.ndarray, actions: np.ndarray, every_step: bool, by_b
                   displaced: np.ndarray, speed: np.ndarray, dist_at: np.ndarray, dist_tt: np.ndarray,
                   earliest: np.ndarray, deadline: np.ndarray, doable: np.ndarray, duration: np.ndarray,
                   task_start: np.ndarray, pay: np.ndarray, gain: np.ndarray, pt_members: np.ndarray,
-                  pt_reward: np.ndarray, pt_start: np.ndarray, pt_cost: np.ndarray) -> None:
-    """``StepEngine.apply`` of each instance in ``which``: its (N,) valid actions (pass, bid j + 1, quit M + 1 + j)
-    in agent order against the view taken before them (``Protocol.bid``, ``Protocol.quit``); marks ``ENDS_ROUND``
-    where the round ends. A quit after a change in the same step re-times the changed paths first, as
-    ``Protocol.quit_options`` does through ``Protocol.view``."""
+                  pt_reward: np.ndarray, pt_start: np.ndarray, pt_cost: np.ndarray, bid_round: np.ndarray,
+                  released: np.ndarray) -> None:
+    """``StepEngine.apply`` of each instance in ``which``: its (N,) valid actions (pass, bid j + 1, quit M + 1 + j,
+    release 2M + 1 + j) in agent order against the view taken before them (``Protocol.bid``, ``Protocol.quit``,
+    ``Protocol.release``); marks ``ENDS_ROUND`` where the round ends. A quit or a release after a change in the same
+    step re-times the changed paths first, as ``Protocol.quit_options`` and ``Protocol.release_options`` do through
+    ``Protocol.view``."""
     n_inst, n = actions.shape
     m = count.shape[2]
     gone = np.zeros(m, dtype=np.bool_)
@@ -110,8 +115,9 @@ def apply_actions(which: np.ndarray, actions: np.ndarray, every_step: bool, by_b
             if action == 0:
                 passed[k, i] = True
                 continue
-            if action > m:                                   # actions.encode_quit(j, m) = 1 + m + j
-                j = action - 1 - m
+            if action > m:                                   # a quit or a release
+                quitting = action <= 2 * m                   # actions.encode_quit(j, m) = 1 + m + j
+                j = action - 1 - m if quitting else action - 1 - 2 * m      # actions.encode_release(j, m)
                 touched = False
                 for a in range(n):
                     touched = touched or dirty[k, a]
@@ -122,10 +128,14 @@ def apply_actions(which: np.ndarray, actions: np.ndarray, every_step: bool, by_b
                                    pt_members[k], pt_reward[k], pt_start[k], pt_cost[k])
                 _release(i, j, by_bundle, bundles[k], bundle_len[k], paths[k], path_len[k], ids[k], values[k],
                          count[k], own[k], capacity[k], gone)
-                quit[k, i, j] = True
-                quit_blocked[k, i, j] = until_joined
-                istate[k, QUITS] += 1
-                pending[k, i, j] = True
+                if quitting:
+                    quit[k, i, j] = True
+                    quit_blocked[k, i, j] = until_joined
+                    istate[k, QUITS] += 1
+                    pending[k, i, j] = True
+                else:
+                    released[k, i, j] = True
+                    istate[k, RELEASES] += 1
                 dirty[k, i] = stale[k, i] = True
                 passed[k, i] = False
                 continue
@@ -143,6 +153,7 @@ def apply_actions(which: np.ndarray, actions: np.ndarray, every_step: bool, by_b
             set_member(ids[k], values[k], count[k], own[k], capacity[k], i, i, j, value)
             assigned_at[k, i, j] = now
             istate[k, BIDS] += 1
+            bid_round[k, i, j] = now
             pending[k, i, j] = False                         # re-bid before anyone saw the quit
             dirty[k, i] = stale[k, i] = True
             passed[k, i] = False
@@ -481,21 +492,23 @@ def score_all(which: np.ndarray, stepped: np.ndarray, max_cycles: int, leg_cost:
 
 @jit
 def observe_all(which: np.ndarray, prereq_mode: int, warping: bool, strict: bool, silence_column: int,
-                task_quitting: bool, delta: int, columns: np.ndarray, istate: np.ndarray, fstate: np.ndarray,
-                statics: np.ndarray, passed: np.ndarray, stale: np.ndarray, count: np.ndarray, ids: np.ndarray,
-                values: np.ndarray, own: np.ndarray, stamps: np.ndarray, assigned_at: np.ndarray, quit: np.ndarray,
-                quit_blocked: np.ndarray, bundle_len: np.ndarray,
-                single: np.ndarray, gain: np.ndarray, equipment_match: np.ndarray, fillable: np.ndarray,
-                capacity: np.ndarray, restricted: np.ndarray, required: np.ndarray, agent_eq: np.ndarray,
-                prereqs: np.ndarray, view_bid: np.ndarray, outbid: np.ndarray, eligible: np.ndarray,
-                prereqs_met: np.ndarray, members: np.ndarray, group_total: np.ndarray, lowest_bid: np.ndarray,
-                displaced: np.ndarray, displaced_bid: np.ndarray, in_bundle: np.ndarray, tasks: np.ndarray,
-                own_features: np.ndarray, masks: np.ndarray) -> None:
+                task_quitting: bool, delta: int, guard: int, columns: np.ndarray, istate: np.ndarray,
+                fstate: np.ndarray, statics: np.ndarray, passed: np.ndarray, stale: np.ndarray, count: np.ndarray,
+                ids: np.ndarray, values: np.ndarray, own: np.ndarray, stamps: np.ndarray, assigned_at: np.ndarray,
+                quit: np.ndarray, quit_blocked: np.ndarray, bundle_len: np.ndarray, single: np.ndarray,
+                gain: np.ndarray, equipment_match: np.ndarray, fillable: np.ndarray, capacity: np.ndarray,
+                restricted: np.ndarray, required: np.ndarray, agent_eq: np.ndarray, prereqs: np.ndarray,
+                view_bid: np.ndarray, outbid: np.ndarray, eligible: np.ndarray, prereqs_met: np.ndarray,
+                members: np.ndarray, group_total: np.ndarray, lowest_bid: np.ndarray, displaced: np.ndarray,
+                displaced_bid: np.ndarray, in_bundle: np.ndarray, bid_round: np.ndarray, released: np.ndarray,
+                tasks: np.ndarray, own_features: np.ndarray, masks: np.ndarray) -> None:
     """``TaskAllocEnv._rows`` of each instance in ``which``: the stale rows of its bid view (``bids.bid_rows``), the
     per-step observation columns (``observe.step_features``; ``member_silence`` at ``silence_column`` ≥ 0, as
-    ``ObservationBuilder._finish`` writes it) and the action masks (``masks.fill_masks``). ``tasks`` (K, N, M, F)
-    and ``own_features`` (K, N, ≥ 7) are views into the observations in their dtype: each value is computed in
-    float64 and rounded once when stored, as ``ObservationBuilder`` rounds its float64 buffer."""
+    ``ObservationBuilder._finish`` writes it) and the action masks (``masks.fill_masks``; with release columns,
+    ``masks`` (K, N, 1 + 3M), the releases ``Protocol.release_options`` allows under ``guard``, a ``RELEASE_GUARDS``
+    code). ``tasks`` (K, N, M, F) and ``own_features`` (K, N, ≥ 7) are views into the observations in their dtype:
+    each value is computed in float64 and rounded once when stored, as ``ObservationBuilder`` rounds its float64
+    buffer."""
     n_inst, n, m = gain.shape
     rows = np.zeros(n, dtype=np.int64)
     sizes = np.zeros(n, dtype=np.int64)
@@ -503,6 +516,8 @@ def observe_all(which: np.ndarray, prereq_mode: int, warping: bool, strict: bool
     can_bid = np.zeros((n, m), dtype=np.bool_)
     no_quits = np.zeros((n, m), dtype=np.bool_)
     everyone_known = np.ones((n, m), dtype=np.bool_)
+    can_release = np.zeros((n, m), dtype=np.bool_)
+    releasing = masks.shape[2] > 1 + 2 * m
     for k in range(n_inst):
         if not which[k]:
             continue
@@ -542,4 +557,9 @@ def observe_all(which: np.ndarray, prereq_mode: int, warping: bool, strict: bool
                             value = (now - stamps[k, i, a]) / timeout
                         quiet = max(quiet, value) if c > 0 else value
                     tasks[k, i, j, silence_column] = min(quiet, 1.0)
-        fill_masks(can_bid, can_quit, can_quit, passed[k], masks[k])
+        if releasing:                                        # Protocol.release_options
+            for i in range(n):
+                for j in range(m):
+                    can_release[i, j] = in_bundle[k, i, j] and (guard == GUARD_NONE or bid_round[k, i, j] < now) \
+                        and not (guard == GUARD_ONCE and released[k, i, j])
+        fill_masks(can_bid, can_quit, can_release, passed[k], masks[k])
