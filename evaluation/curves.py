@@ -57,22 +57,23 @@ def plot_bands(out: Path, methods: Mapping[str, Sequence[Mapping[str, Curve]]],
     entries = list(entries or dict.fromkeys(e for runs in methods.values() for run in runs for e in run))
     fig, axes = plt.subplots(1, len(entries), figsize=(1 + 4.6 * len(entries), 4.2), squeeze=False)
     axes = axes[0]
-    for label, runs in methods.items():
+    for index, (label, runs) in enumerate(methods.items()):
+        color = f"C{index % 10}"                        # one colour per method across the panels
         for ax, entry in zip(axes, entries):
             per_seed = [run[entry] for run in runs if entry in run]
             if not per_seed:
                 continue
             steps, mean, half = mean_and_band(per_seed)
-            line = ax.plot(steps, mean, marker="o", markersize=2.5, label=f"{label} ({len(per_seed)} seeds)")
+            ax.plot(steps, mean, marker="o", markersize=2.5, color=color, label=f"{label} ({len(per_seed)} seeds)")
             if len(per_seed) > 1:
-                ax.fill_between(steps, mean - half, mean + half, color=line[0].get_color(), alpha=0.2)
+                ax.fill_between(steps, mean - half, mean + half, color=color, alpha=0.2)
     for ax, entry in zip(axes, entries):
         ax.axhline(1.0, color="black", linestyle="--", linewidth=1)
         ax.set_title(f"validation: {entry}")
         ax.set_xlabel("agent steps")
         ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="lower right")
     axes[0].set_ylabel("mean score / CBGABI's (same seeds)")
-    axes[0].legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)

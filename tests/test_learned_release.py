@@ -67,7 +67,17 @@ def observations(env_kwargs: dict, seeds: range, steps: int = 6) -> tuple[np.nda
 
 
 def test_the_committed_checkpoints_play_bit_identically():
-    """Every committed model (no ``kinds`` in its JSON: 2) gives the pinned logits and greedy actions exactly."""
+    """Every committed model (no ``kinds`` in its JSON: 2) gives the pinned logits and greedy actions exactly (on one
+    torch thread, as they were pinned: another thread count may sum in another order)."""
+    threads = th.get_num_threads()
+    th.set_num_threads(1)
+    try:
+        check_pinned_logits()
+    finally:
+        th.set_num_threads(threads)
+
+
+def check_pinned_logits() -> None:
     pinned = json.loads(PINNED.read_text())
     obs = np.array(pinned["observation"], dtype=np.float32)
     masks = np.array(pinned["action_mask"], dtype=np.int8)
