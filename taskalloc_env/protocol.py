@@ -36,7 +36,7 @@ from taskalloc_env.bidding import BidView, refresh_rows
 from taskalloc_env.config import TaskAllocConfig, episode_bound
 from taskalloc_env.consensus import Snapshot, Traffic, exchange, snapshot
 from taskalloc_env.group_table import GroupTable
-from taskalloc_env.kernels.quits import quittable
+from taskalloc_env.kernels.quits import RELEASE_GUARDS, quittable, releasable
 from taskalloc_env.knowledge import NEVER, LocalKnowledge
 from taskalloc_env.network import CommGraph, dropout_schedule, join_schedule, make_network
 from taskalloc_env.releases import release_ticks
@@ -260,6 +260,15 @@ class Protocol:
         it never released before; none with the option off."""
         if not self.cfg.release_actions:
             return self._no_quits
+        if not kernels.COMPILED:
+            return self.releasable_reference()
+        allowed = np.empty(self._released.shape, dtype=bool)
+        releasable(self.view().in_bundle, self._bid_round, self._released, self.round,
+                   RELEASE_GUARDS[self.cfg.release_guard], allowed)
+        return allowed
+
+    def releasable_reference(self) -> np.ndarray:
+        """``release_options`` in numpy (the reference of ``kernels.quits.releasable``)."""
         guard = self.cfg.release_guard
         if guard == "none":
             return self.view().in_bundle

@@ -28,6 +28,7 @@ from taskalloc_env.group_table import EMPTY, GroupTable
 from taskalloc_env.kernels import batch
 from taskalloc_env.kernels.bids import PREREQ_MODES
 from taskalloc_env.kernels.observe import COLUMNS as KERNEL_COLUMNS
+from taskalloc_env.kernels.quits import RELEASE_GUARDS
 from taskalloc_env.observation import state_vector
 
 # what Protocol.unresolved says, by ``kernels.batch``'s code (the texts are Protocol.end_round's)
@@ -92,7 +93,7 @@ class ArrayBatch:
         self.strict = cfg.outbid_ties == "strict"
         self.task_quitting, self.delta = bool(cfg.task_quitting), int(cfg.delta)
         self.reset_on_additions, self.until_joined = cfg.reset_on == "additions", cfg.quit_block == "until_joined"
-        self.guard = batch.RELEASE_GUARDS[cfg.release_guard]
+        self.guard = RELEASE_GUARDS[cfg.release_guard]
         names = layout.task_names
         self.columns = np.array([names.index(c) for c in KERNEL_COLUMNS], dtype=np.int64)
         self.silence_column = names.index("member_silence") if "member_silence" in names else -1

@@ -362,3 +362,21 @@ def test_a_learned_policy_refuses_an_environment_with_release_actions():
     env.reset(seed=0)
     with pytest.raises(ValueError, match=r"1 \+ 2M layout .* has release actions: build it without release_actions"):
         policy.start(env, 0)
+
+
+@pytest.mark.parametrize("guard", ["none", "exchange", "once"])
+def test_the_compiled_release_options_equal_their_numpy_reference(guard):
+    """``kernels.quits.releasable`` (what ``release_options`` and the arrays engine use) and
+    ``Protocol.releasable_reference`` agree at every step of random masked play, and both allow releases."""
+    env = TaskAllocEnv(n_agents=4, n_tasks=6, agents_per_task=[1, 2], release_actions=True, release_guard=guard,
+                       task_quitting=True)
+    rng = np.random.default_rng(3)
+    allowed = 0
+    for seed in range(3):
+        obs, _ = env.reset(seed=seed)
+        while env.agents and env.protocol.round < 10:
+            compiled = env.protocol.release_options()
+            np.testing.assert_array_equal(compiled, env.protocol.releasable_reference())
+            allowed += int(compiled.sum())
+            obs, *_ = env.step({a: int(rng.choice(np.flatnonzero(o["action_mask"]))) for a, o in obs.items()})
+    assert allowed > 0

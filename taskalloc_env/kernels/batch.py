@@ -29,7 +29,7 @@ from taskalloc_env.kernels.masks import fill_masks
 from taskalloc_env.kernels.merge import exchange_all
 from taskalloc_env.kernels.observe import step_features
 from taskalloc_env.kernels.plan import retime_rows
-from taskalloc_env.kernels.quits import quittable
+from taskalloc_env.kernels.quits import quittable, releasable
 from taskalloc_env.kernels.score import paid_groups
 from taskalloc_env.kernels.table import joined_members, set_member
 
@@ -48,9 +48,6 @@ FLOAT_STATE = 7
 # columns of the (K, C) static integers of an instance
 MAX_ROUNDS, DIAMETER, SILENCE_TIMEOUT, MAX_BUNDLE, HAS_PREREQS, EQUIPMENT_ANY, N_LINKS = range(7)
 STATIC_INTS = 7
-# ``release_guard`` as a code for ``observe_all`` (``Protocol.release_options``)
-GUARD_NONE, GUARD_EXCHANGE, GUARD_ONCE = range(3)
-RELEASE_GUARDS = {"none": GUARD_NONE, "exchange": GUARD_EXCHANGE, "once": GUARD_ONCE}
 
 
 @jit
@@ -505,7 +502,7 @@ def observe_all(which: np.ndarray, prereq_mode: int, warping: bool, strict: bool
     """``TaskAllocEnv._rows`` of each instance in ``which``: the stale rows of its bid view (``bids.bid_rows``), the
     per-step observation columns (``observe.step_features``; ``member_silence`` at ``silence_column`` ≥ 0, as
     ``ObservationBuilder._finish`` writes it) and the action masks (``masks.fill_masks``; with release columns,
-    ``masks`` (K, N, 1 + 3M), the releases ``Protocol.release_options`` allows under ``guard``, a ``RELEASE_GUARDS``
+    ``masks`` (K, N, 1 + 3M), the releases ``quits.releasable`` allows under ``guard``, a ``quits.RELEASE_GUARDS``
     code). ``tasks`` (K, N, M, F) and ``own_features`` (K, N, ≥ 7) are views into the observations in their dtype:
     each value is computed in float64 and rounded once when stored, as ``ObservationBuilder`` rounds its float64
     buffer."""
@@ -558,8 +555,5 @@ def observe_all(which: np.ndarray, prereq_mode: int, warping: bool, strict: bool
                         quiet = max(quiet, value) if c > 0 else value
                     tasks[k, i, j, silence_column] = min(quiet, 1.0)
         if releasing:                                        # Protocol.release_options
-            for i in range(n):
-                for j in range(m):
-                    can_release[i, j] = in_bundle[k, i, j] and (guard == GUARD_NONE or bid_round[k, i, j] < now) \
-                        and not (guard == GUARD_ONCE and released[k, i, j])
+            releasable(in_bundle[k], bid_round[k], released[k], now, guard, can_release)
         fill_masks(can_bid, can_quit, can_release, passed[k], masks[k])
